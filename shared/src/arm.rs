@@ -1,0 +1,546 @@
+//! The planar two-link direct-drive arm (thesis §3.1, §4.5.1): forward and inverse kinematics,
+//! Jacobian, rigid-body dynamics, and the PID joint servos.
+//!
+//! Joint angles q = (q1, q2) in rad; q1 from world X to link 1, q2 from link 1 to link 2. The
+//! tool tip is at the end of link 2 and the force sensor's x axis (x_e) points along link 2
+//! (thesis fig. 3.3). No gravity: the arm moves in a horizontal plane.
+//!
+//! Dynamics (standard two-link form): `M(q) q̈ + h(q, q̇) + B q̇ = τ + Jᵀ F_tip` with
+//! `M11 = I1 + m2' l1² + I2 + 2β cos q2`, `M12 = I2 + β cos q2`, `M22 = I2`,
+//! `h = (−β sin q2 (2 q̇1 q̇2 + q̇2²), β sin q2 q̇1²)`, where I2 is link 2's inertia (with
+//! tip mass and the joint-2 rotor) about joint 2, I1 link 1's about joint 1 (with rotor 1 and
+//! the elbow motor's stator), m2' the mass of link 2 and tip, and β = l1 × (first moment of
+//! link 2 and tip about joint 2).
+
+use crate::math::Vec2;
+use nalgebra::{Matrix2, Vector2};
+use serde::{Deserialize, Serialize};
+
+/// Physical parameters of the arm. SI units.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ArmParams {
+    /// Link 1 length l1 (m).
+    pub link1_length_m: f64,
+    /// Link 2 length l2, joint 2 to tool tip (m).
+    pub link2_length_m: f64,
+    /// Link 1 mass (kg).
+    pub link1_mass_kg: f64,
+    /// Link 1 centre of mass from joint 1 (m).
+    pub link1_com_m: f64,
+    /// Link 1 inertia about its centre of mass (kg·m²).
+    pub link1_inertia_kg_m2: f64,
+    /// Joint-1 motor rotor inertia (kg·m²).
+    pub rotor1_inertia_kg_m2: f64,
+    /// Mass at the elbow (joint-2 motor stator) (kg).
+    pub elbow_mass_kg: f64,
+    /// Link 2 mass (kg).
+    pub link2_mass_kg: f64,
+    /// Link 2 centre of mass from joint 2 (m).
+    pub link2_com_m: f64,
+    /// Link 2 inertia about its centre of mass (kg·m²).
+    pub link2_inertia_kg_m2: f64,
+    /// Joint-2 rotor inertia; a direct-drive rotor turns with link 2 (kg·m²).
+    pub rotor2_inertia_kg_m2: f64,
+    /// Point mass at the tip: sensor, flange and tool (kg).
+    pub tip_mass_kg: f64,
+    /// Viscous joint damping (N·m·s/rad), both joints.
+    pub joint_damping_nms_per_rad: [f64; 2],
+    /// Joint torque limits (N·m).
+    pub torque_limit_nm: [f64; 2],
+}
+
+impl Default for ArmParams {
+    /// A direct-drive arm whose second link has its centre of percussion at the tool tip, so
+    /// that at the default operating point (link 2 perpendicular to the line from the base to
+    /// the tip) the tangential and normal directions are decoupled in inertia and in servo
+    /// compliance (see `docs/model.md`).
+    fn default() -> Self {
+        Self {
+            link1_length_m: 0.5,
+            link2_length_m: 0.3,
+            link1_mass_kg: 6.0,
+            link1_com_m: 0.25,
+            link1_inertia_kg_m2: 6.0 * 0.25 / 12.0,
+            rotor1_inertia_kg_m2: 0.3,
+            elbow_mass_kg: 5.0,
+            link2_mass_kg: 1.5,
+            link2_com_m: 0.15,
+            link2_inertia_kg_m2: 1.5 * 0.09 / 12.0,
+            rotor2_inertia_kg_m2: 0.0225,
+            tip_mass_kg: 3.0,
+            joint_damping_nms_per_rad: [0.05, 0.01],
+            torque_limit_nm: [60.0, 25.0],
+        }
+    }
+}
+
+/// Which inverse-kinematics branch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Elbow {
+    /// q2 > 0.
+    Positive,
+    /// q2 < 0.
+    Negative,
+}
+
+/// Why inverse kinematics has no answer.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum IkError {
+    /// The point is outside the annulus the arm can reach.
+    #[error("point ({x:.4}, {y:.4}) m is out of reach (distance {r:.4} m not in [{min:.4}, {max:.4}])")]
+    OutOfReach {
+        /// X (m).
+        x: f64,
+        /// Y (m).
+        y: f64,
+        /// Distance from the base (m).
+        r: f64,
+        /// Inner reach (m).
+        min: f64,
+        /// Outer reach (m).
+        max: f64,
+    },
+    /// A coordinate is not finite.
+    #[error("inverse kinematics was given a non-finite point")]
+    NotFinite,
+}
+
+/// The arm model with derived dynamic constants.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Arm {
+    /// The physical parameters.
+    pub params: ArmParams,
+    i1: f64,
+    i2: f64,
+    beta: f64,
+    m2t: f64,
+}
+
+impl Arm {
+    /// Builds the model.
+    pub fn new(params: ArmParams) -> Self {
+        let p = params;
+        let l1 = p.link1_length_m;
+        let l2 = p.link2_length_m;
+        let i1 = p.link1_inertia_kg_m2
+            + p.link1_mass_kg * p.link1_com_m.powi(2)
+            + p.rotor1_inertia_kg_m2
+            + p.elbow_mass_kg * l1 * l1;
+        let i2 = p.link2_inertia_kg_m2
+            + p.link2_mass_kg * p.link2_com_m.powi(2)
+            + p.rotor2_inertia_kg_m2
+            + p.tip_mass_kg * l2 * l2;
+        let s2 = p.link2_mass_kg * p.link2_com_m + p.tip_mass_kg * l2;
+        Self { params, i1, i2, beta: l1 * s2, m2t: p.link2_mass_kg + p.tip_mass_kg }
+    }
+
+    /// Checks the parameters.
+    pub fn validate(params: &ArmParams) -> Result<(), String> {
+        let vals = [
+            ("link1_length_m", params.link1_length_m),
+            ("link2_length_m", params.link2_length_m),
+        ];
+        for (n, v) in vals {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("arm.{n} = {v} must be > 0"));
+            }
+        }
+        let nonneg = [
+            ("link1_mass_kg", params.link1_mass_kg),
+            ("link1_inertia_kg_m2", params.link1_inertia_kg_m2),
+            ("rotor1_inertia_kg_m2", params.rotor1_inertia_kg_m2),
+            ("elbow_mass_kg", params.elbow_mass_kg),
+            ("link2_mass_kg", params.link2_mass_kg),
+            ("link2_inertia_kg_m2", params.link2_inertia_kg_m2),
+            ("rotor2_inertia_kg_m2", params.rotor2_inertia_kg_m2),
+            ("tip_mass_kg", params.tip_mass_kg),
+            ("joint_damping_nms_per_rad[0]", params.joint_damping_nms_per_rad[0]),
+            ("joint_damping_nms_per_rad[1]", params.joint_damping_nms_per_rad[1]),
+            ("torque_limit_nm[0]", params.torque_limit_nm[0]),
+            ("torque_limit_nm[1]", params.torque_limit_nm[1]),
+        ];
+        for (n, v) in nonneg {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!("arm.{n} = {v} must be a non-negative number"));
+            }
+        }
+        let arm = Arm::new(*params);
+        if arm.i2 <= 0.0 || arm.i1 <= 0.0 {
+            return Err("arm inertias must be positive: give the links mass or inertia".into());
+        }
+        Ok(())
+    }
+
+    /// Tip position (m).
+    pub fn forward(&self, q: Vector2<f64>) -> Vec2 {
+        let (l1, l2) = (self.params.link1_length_m, self.params.link2_length_m);
+        let q12 = q[0] + q[1];
+        Vec2::new(l1 * q[0].cos() + l2 * q12.cos(), l1 * q[0].sin() + l2 * q12.sin())
+    }
+
+    /// Tip Jacobian ∂p/∂q.
+    pub fn jacobian(&self, q: Vector2<f64>) -> Matrix2<f64> {
+        let (l1, l2) = (self.params.link1_length_m, self.params.link2_length_m);
+        let (s1, c1) = q[0].sin_cos();
+        let (s12, c12) = (q[0] + q[1]).sin_cos();
+        Matrix2::new(-l1 * s1 - l2 * s12, -l2 * s12, l1 * c1 + l2 * c12, l2 * c12)
+    }
+
+    /// Time derivative of the Jacobian, J̇(q, q̇).
+    pub fn jacobian_dot(&self, q: Vector2<f64>, qd: Vector2<f64>) -> Matrix2<f64> {
+        let (l1, l2) = (self.params.link1_length_m, self.params.link2_length_m);
+        let (s1, c1) = q[0].sin_cos();
+        let (s12, c12) = (q[0] + q[1]).sin_cos();
+        let w1 = qd[0];
+        let w12 = qd[0] + qd[1];
+        Matrix2::new(
+            -l1 * c1 * w1 - l2 * c12 * w12,
+            -l2 * c12 * w12,
+            -l1 * s1 * w1 - l2 * s12 * w12,
+            -l2 * s12 * w12,
+        )
+    }
+
+    /// Angle of link 2 (and of the sensor's x_e axis) from world X (rad).
+    pub fn link2_angle(&self, q: Vector2<f64>) -> f64 {
+        q[0] + q[1]
+    }
+
+    /// Inverse kinematics for the tip at `p` on the given elbow branch.
+    pub fn inverse(&self, p: Vec2, elbow: Elbow) -> Result<Vector2<f64>, IkError> {
+        if !(p.x.is_finite() && p.y.is_finite()) {
+            return Err(IkError::NotFinite);
+        }
+        let (l1, l2) = (self.params.link1_length_m, self.params.link2_length_m);
+        let r2 = p.norm_squared();
+        let c2 = (r2 - l1 * l1 - l2 * l2) / (2.0 * l1 * l2);
+        if !(-1.0..=1.0).contains(&c2) {
+            return Err(IkError::OutOfReach {
+                x: p.x,
+                y: p.y,
+                r: r2.sqrt(),
+                min: (l1 - l2).abs(),
+                max: l1 + l2,
+            });
+        }
+        let s2 = match elbow {
+            Elbow::Positive => (1.0 - c2 * c2).sqrt(),
+            Elbow::Negative => -(1.0 - c2 * c2).sqrt(),
+        };
+        let q2 = s2.atan2(c2);
+        let q1 = p.y.atan2(p.x) - (l2 * s2).atan2(l1 + l2 * c2);
+        Ok(Vector2::new(q1, q2))
+    }
+
+    /// Joint-space inertia M(q).
+    pub fn mass_matrix(&self, q: Vector2<f64>) -> Matrix2<f64> {
+        let l1 = self.params.link1_length_m;
+        let c2 = q[1].cos();
+        let m11 = self.i1 + self.m2t * l1 * l1 + self.i2 + 2.0 * self.beta * c2;
+        let m12 = self.i2 + self.beta * c2;
+        Matrix2::new(m11, m12, m12, self.i2)
+    }
+
+    /// Coriolis and centrifugal torques h(q, q̇).
+    pub fn coriolis(&self, q: Vector2<f64>, qd: Vector2<f64>) -> Vector2<f64> {
+        let s2 = q[1].sin();
+        Vector2::new(
+            -self.beta * s2 * (2.0 * qd[0] * qd[1] + qd[1] * qd[1]),
+            self.beta * s2 * qd[0] * qd[0],
+        )
+    }
+
+    /// Kinetic energy ½ q̇ᵀ M q̇ (J).
+    pub fn kinetic_energy(&self, q: Vector2<f64>, qd: Vector2<f64>) -> f64 {
+        0.5 * qd.dot(&(self.mass_matrix(q) * qd))
+    }
+
+    /// Joint accelerations for torques `tau` and a tip force `f_tip` (world, on the tool).
+    pub fn acceleration(
+        &self,
+        q: Vector2<f64>,
+        qd: Vector2<f64>,
+        tau: Vector2<f64>,
+        f_tip: Vec2,
+    ) -> Vector2<f64> {
+        let m = self.mass_matrix(q);
+        let damping = Vector2::new(
+            self.params.joint_damping_nms_per_rad[0] * qd[0],
+            self.params.joint_damping_nms_per_rad[1] * qd[1],
+        );
+        let rhs = tau + self.jacobian(q).transpose() * f_tip - self.coriolis(q, qd) - damping;
+        // M is symmetric positive definite: closed-form 2×2 solve.
+        let det = m[(0, 0)] * m[(1, 1)] - m[(0, 1)] * m[(1, 0)];
+        Vector2::new(
+            (m[(1, 1)] * rhs[0] - m[(0, 1)] * rhs[1]) / det,
+            (m[(0, 0)] * rhs[1] - m[(1, 0)] * rhs[0]) / det,
+        )
+    }
+
+    /// The configuration at which link 2 is perpendicular to the line from the base to the tip,
+    /// with the tip at distance `√(l1² − l2²)` along world angle `bearing` (rad). There the
+    /// tip's motion along the bearing is joint 2 alone and motion along link 2 is joint 1 alone.
+    /// Returns `None` if l2 ≥ l1.
+    pub fn decoupled_configuration(&self, bearing: f64, elbow: Elbow) -> Option<Vector2<f64>> {
+        let (l1, l2) = (self.params.link1_length_m, self.params.link2_length_m);
+        if l2 >= l1 {
+            return None;
+        }
+        let r = (l1 * l1 - l2 * l2).sqrt();
+        let p = Vec2::new(r * bearing.cos(), r * bearing.sin());
+        self.inverse(p, elbow).ok()
+    }
+}
+
+/// PID gains of one joint (N·m/rad, N·m/(rad·s), N·m·s/rad).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct PidGains {
+    /// Proportional gain.
+    pub kp: f64,
+    /// Integral gain.
+    pub ki: f64,
+    /// Derivative gain.
+    pub kd: f64,
+}
+
+/// |T(jω)| of a rigid joint of inertia `inertia` under PID `g` (derivative on error):
+/// `T(s) = (kd s² + kp s + ki) / (I s³ + kd s² + kp s + ki)`.
+pub fn closed_loop_magnitude(g: &PidGains, inertia: f64, omega: f64) -> f64 {
+    use nalgebra::Complex;
+    let s = Complex::new(0.0, omega);
+    let num = s * s * g.kd + s * g.kp + g.ki;
+    let den = s * s * s * inertia + s * s * g.kd + s * g.kp + g.ki;
+    (num / den).norm()
+}
+
+/// PID gains giving a rigid joint of `inertia` (kg·m²) a closed-loop −3 dB bandwidth of
+/// `bandwidth_hz`: `kp = I ωn²`, `kd = 2 ζ I ωn`, `ki = r I ωn³` (integral corner at r·ωn),
+/// with ωn found so that `|T(j 2π f_b)| = 1/√2` (the highest crossing).
+pub fn tune_pid_for_bandwidth(
+    inertia: f64,
+    bandwidth_hz: f64,
+    damping_ratio: f64,
+    integral_ratio: f64,
+) -> PidGains {
+    let gains = |wn: f64| PidGains {
+        kp: inertia * wn * wn,
+        kd: 2.0 * damping_ratio * inertia * wn,
+        ki: integral_ratio * inertia * wn * wn * wn,
+    };
+    // T depends on s/ωn only: find the bandwidth x of the ωn = 1 loop, then scale.
+    let unit_loop = gains(1.0);
+    let target = std::f64::consts::FRAC_1_SQRT_2;
+    // Scan down from high frequency to the first crossing, then bisect.
+    let mut hi = 100.0;
+    let mut lo = hi;
+    while lo > 1e-3 {
+        lo *= 0.95;
+        if closed_loop_magnitude(&unit_loop, inertia, lo) >= target {
+            break;
+        }
+        hi = lo;
+    }
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if closed_loop_magnitude(&unit_loop, inertia, mid) >= target {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let x = 0.5 * (lo + hi);
+    gains(std::f64::consts::TAU * bandwidth_hz / x)
+}
+
+/// The two joint PID servos with torque saturation and anti-windup.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JointServo {
+    /// Gains of joint 1 and 2.
+    pub gains: [PidGains; 2],
+    /// Torque limits (N·m).
+    pub torque_limit: [f64; 2],
+    /// Integral of the position error (rad·s), scaled by ki inside.
+    integral: Vector2<f64>,
+}
+
+impl JointServo {
+    /// New servo with a zero integrator.
+    pub fn new(gains: [PidGains; 2], torque_limit: [f64; 2]) -> Self {
+        Self { gains, torque_limit, integral: Vector2::zeros() }
+    }
+
+    /// Presets the integrator so that, at zero error, the servo outputs `torque` (bumpless start
+    /// in contact).
+    pub fn preset_torque(&mut self, torque: Vector2<f64>) {
+        for j in 0..2 {
+            let ki = self.gains[j].ki;
+            self.integral[j] = if ki > 0.0 { torque[j] / ki } else { 0.0 };
+        }
+    }
+
+    /// The integrator's share of the torque (N·m).
+    pub fn integral_torque(&self) -> Vector2<f64> {
+        Vector2::new(self.gains[0].ki * self.integral[0], self.gains[1].ki * self.integral[1])
+    }
+
+    /// Torque for set-point (q_d, q̇_d) at measured (q, q̇); integrates over `dt`.
+    pub fn torque(
+        &mut self,
+        q_d: Vector2<f64>,
+        qd_d: Vector2<f64>,
+        q: Vector2<f64>,
+        qd: Vector2<f64>,
+        dt: f64,
+    ) -> Vector2<f64> {
+        let mut tau = Vector2::zeros();
+        for j in 0..2 {
+            let g = self.gains[j];
+            let e = q_d[j] - q[j];
+            let ed = qd_d[j] - qd[j];
+            let unsat = g.kp * e + g.kd * ed + g.ki * (self.integral[j] + e * dt);
+            let lim = self.torque_limit[j];
+            // Conditional integration: do not wind up further into saturation.
+            if unsat.abs() <= lim || unsat.signum() != e.signum() {
+                self.integral[j] += e * dt;
+            }
+            let out = g.kp * e + g.kd * ed + g.ki * self.integral[j];
+            tau[j] = out.clamp(-lim, lim);
+        }
+        tau
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn arm() -> Arm {
+        Arm::new(ArmParams::default())
+    }
+
+    #[test]
+    fn kinematics_round_trip_on_both_branches() {
+        let a = arm();
+        for &(x, y) in &[(0.4, 0.0), (0.3, 0.5), (-0.2, 0.6), (0.75, -0.1), (0.25, -0.1)] {
+            for elbow in [Elbow::Positive, Elbow::Negative] {
+                let p = Vec2::new(x, y);
+                let q = a.inverse(p, elbow).unwrap();
+                assert!((a.forward(q) - p).norm() < 1e-12, "{p:?} {elbow:?}");
+            }
+        }
+        assert!(matches!(a.inverse(Vec2::new(0.9, 0.0), Elbow::Positive), Err(IkError::OutOfReach { .. })));
+        assert!(matches!(a.inverse(Vec2::new(f64::NAN, 0.0), Elbow::Positive), Err(IkError::NotFinite)));
+    }
+
+    #[test]
+    fn jacobian_matches_finite_differences() {
+        let a = arm();
+        for &(q1, q2) in &[(0.3, -1.2), (1.0, 2.0), (-0.7, 0.4)] {
+            let q = Vector2::new(q1, q2);
+            let j = a.jacobian(q);
+            let h = 1e-7;
+            for k in 0..2 {
+                let mut dq = Vector2::zeros();
+                dq[k] = h;
+                let col = (a.forward(q + dq) - a.forward(q - dq)) / (2.0 * h);
+                assert!((col - j.column(k)).norm() < 1e-8);
+            }
+            let qd = Vector2::new(0.7, -1.3);
+            let jd = a.jacobian_dot(q, qd);
+            let num = (a.jacobian(q + qd * h) - a.jacobian(q - qd * h)) / (2.0 * h);
+            assert!((jd - num).norm() < 1e-7);
+        }
+    }
+
+    /// M(q) from the closed form equals the sum over bodies of m Jvᵀ Jv + I Jωᵀ Jω.
+    #[test]
+    fn mass_matrix_matches_body_jacobian_sum() {
+        let a = arm();
+        let p = a.params;
+        let l1 = p.link1_length_m;
+        for &(q1, q2) in &[(0.2f64, -2.2f64), (1.3, 0.5)] {
+            let q = Vector2::new(q1, q2);
+            let (s1, c1) = q1.sin_cos();
+            let (s12, c12) = (q1 + q2).sin_cos();
+            let jv1 = Matrix2::new(-p.link1_com_m * s1, 0.0, p.link1_com_m * c1, 0.0);
+            let jel = Matrix2::new(-l1 * s1, 0.0, l1 * c1, 0.0);
+            let lc2 = p.link2_com_m;
+            let jv2 = Matrix2::new(-l1 * s1 - lc2 * s12, -lc2 * s12, l1 * c1 + lc2 * c12, lc2 * c12);
+            let jt = a.jacobian(q);
+            let w1 = Matrix2::new(1.0, 0.0, 0.0, 0.0);
+            let w2 = Matrix2::new(1.0, 1.0, 1.0, 1.0);
+            let m = jv1.transpose() * jv1 * p.link1_mass_kg
+                + w1 * (p.link1_inertia_kg_m2 + p.rotor1_inertia_kg_m2)
+                + jel.transpose() * jel * p.elbow_mass_kg
+                + jv2.transpose() * jv2 * p.link2_mass_kg
+                + w2 * (p.link2_inertia_kg_m2 + p.rotor2_inertia_kg_m2)
+                + jt.transpose() * jt * p.tip_mass_kg;
+            assert!((m - a.mass_matrix(q)).norm() < 1e-12, "{m} vs {}", a.mass_matrix(q));
+        }
+    }
+
+    /// Without damping or torque the dynamics conserve energy, and with a torque the power
+    /// balance dE/dt = q̇ᵀτ holds (checked by RK4 integration).
+    #[test]
+    fn dynamics_conserve_energy() {
+        let mut params = ArmParams::default();
+        params.joint_damping_nms_per_rad = [0.0, 0.0];
+        let a = Arm::new(params);
+        let f = |q: Vector2<f64>, qd: Vector2<f64>| a.acceleration(q, qd, Vector2::zeros(), Vec2::zeros());
+        let (mut q, mut qd) = (Vector2::new(0.3, -1.0), Vector2::new(2.0, -3.0));
+        let e0 = a.kinetic_energy(q, qd);
+        let dt = 1e-4;
+        for _ in 0..20000 {
+            let k1 = (qd, f(q, qd));
+            let k2 = (qd + k1.1 * dt / 2.0, f(q + k1.0 * dt / 2.0, qd + k1.1 * dt / 2.0));
+            let k3 = (qd + k2.1 * dt / 2.0, f(q + k2.0 * dt / 2.0, qd + k2.1 * dt / 2.0));
+            let k4 = (qd + k3.1 * dt, f(q + k3.0 * dt, qd + k3.1 * dt));
+            q += (k1.0 + k2.0 * 2.0 + k3.0 * 2.0 + k4.0) * dt / 6.0;
+            qd += (k1.1 + k2.1 * 2.0 + k3.1 * 2.0 + k4.1) * dt / 6.0;
+        }
+        let e1 = a.kinetic_energy(q, qd);
+        assert!((e1 - e0).abs() < 1e-9 * e0, "{e0} -> {e1}");
+    }
+
+    /// At the decoupled configuration the tangential and normal directions are decoupled:
+    /// M12 = 0 (centre of percussion at the tip) and the Jacobian columns are orthogonal.
+    #[test]
+    fn default_arm_is_decoupled_at_the_operating_point() {
+        let a = arm();
+        let q = a.decoupled_configuration(0.0, Elbow::Negative).unwrap();
+        let p = a.forward(q);
+        assert!((p - Vec2::new(0.4, 0.0)).norm() < 1e-12);
+        let j = a.jacobian(q);
+        assert!(j.column(0).dot(&j.column(1)).abs() < 1e-12);
+        assert!(a.mass_matrix(q)[(0, 1)].abs() < 1e-12, "M12 = {}", a.mass_matrix(q)[(0, 1)]);
+        // Link 2 points along −Y: into a surface below the tip.
+        assert!((a.link2_angle(q) + std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+    }
+
+    #[test]
+    fn pid_bandwidth_is_as_requested() {
+        for &(inertia, bw) in &[(2.4, 3.0), (0.3, 15.0)] {
+            let g = tune_pid_for_bandwidth(inertia, bw, 0.7, 0.1);
+            let m = closed_loop_magnitude(&g, inertia, std::f64::consts::TAU * bw);
+            assert!((m - std::f64::consts::FRAC_1_SQRT_2).abs() < 1e-9, "{m}");
+            // Above the bandwidth it only falls.
+            assert!(closed_loop_magnitude(&g, inertia, std::f64::consts::TAU * bw * 1.5) < m);
+        }
+    }
+
+    #[test]
+    fn servo_saturates_without_windup() {
+        let g = PidGains { kp: 100.0, ki: 1000.0, kd: 1.0 };
+        let mut s = JointServo::new([g, g], [1.0, 1.0]);
+        let z = Vector2::zeros();
+        for _ in 0..10000 {
+            let t = s.torque(Vector2::new(1.0, -1.0), z, z, z, 1e-3);
+            assert!(t[0] <= 1.0 && t[1] >= -1.0);
+        }
+        // Integrator did not wind up: error reversal reverses the torque at once.
+        let t = s.torque(Vector2::new(-0.1, 0.1), z, z, z, 1e-3);
+        assert!(t[0] < 0.0 && t[1] > 0.0, "{t:?}");
+    }
+}

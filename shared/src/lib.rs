@@ -1,0 +1,9 @@
+//! afs-shared: the pure, deterministic core of afs.
+#![warn(missing_docs)]
+
+pub mod friction;
+pub mod math;
+pub mod arm;
+pub mod surface;
+pub mod plant;
+pub mod sensor;
