@@ -75,6 +75,23 @@ impl Default for ArmParams {
     }
 }
 
+/// Sines and cosines of one configuration: q1, q2 and q1+q2 (the link-2 / sensor angle).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pose {
+    /// sin q1.
+    pub s1: f64,
+    /// cos q1.
+    pub c1: f64,
+    /// sin q2.
+    pub s2: f64,
+    /// cos q2.
+    pub c2: f64,
+    /// sin(q1+q2).
+    pub s12: f64,
+    /// cos(q1+q2).
+    pub c12: f64,
+}
+
 /// Which inverse-kinematics branch.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -173,33 +190,54 @@ impl Arm {
         Ok(())
     }
 
+    /// The trigonometry of a configuration, computed once and shared by the kinematic and
+    /// dynamic quantities below (the fast loop's dominant cost otherwise).
+    pub fn pose(&self, q: Vector2<f64>) -> Pose {
+        let (s1, c1) = q[0].sin_cos();
+        let (s2, c2) = q[1].sin_cos();
+        // sin/cos(q1+q2) by the addition formulas.
+        let s12 = s1 * c2 + c1 * s2;
+        let c12 = c1 * c2 - s1 * s2;
+        Pose { s1, c1, s2, c2, s12, c12 }
+    }
+
     /// Tip position (m).
     pub fn forward(&self, q: Vector2<f64>) -> Vec2 {
+        self.forward_at(&self.pose(q))
+    }
+
+    /// Tip position (m) at a precomputed pose.
+    pub fn forward_at(&self, p: &Pose) -> Vec2 {
         let (l1, l2) = (self.params.link1_length_m, self.params.link2_length_m);
-        let q12 = q[0] + q[1];
-        Vec2::new(l1 * q[0].cos() + l2 * q12.cos(), l1 * q[0].sin() + l2 * q12.sin())
+        Vec2::new(l1 * p.c1 + l2 * p.c12, l1 * p.s1 + l2 * p.s12)
     }
 
     /// Tip Jacobian ∂p/∂q.
     pub fn jacobian(&self, q: Vector2<f64>) -> Matrix2<f64> {
+        self.jacobian_at(&self.pose(q))
+    }
+
+    /// Tip Jacobian at a precomputed pose.
+    pub fn jacobian_at(&self, p: &Pose) -> Matrix2<f64> {
         let (l1, l2) = (self.params.link1_length_m, self.params.link2_length_m);
-        let (s1, c1) = q[0].sin_cos();
-        let (s12, c12) = (q[0] + q[1]).sin_cos();
-        Matrix2::new(-l1 * s1 - l2 * s12, -l2 * s12, l1 * c1 + l2 * c12, l2 * c12)
+        Matrix2::new(-l1 * p.s1 - l2 * p.s12, -l2 * p.s12, l1 * p.c1 + l2 * p.c12, l2 * p.c12)
     }
 
     /// Time derivative of the Jacobian, J̇(q, q̇).
     pub fn jacobian_dot(&self, q: Vector2<f64>, qd: Vector2<f64>) -> Matrix2<f64> {
+        self.jacobian_dot_at(&self.pose(q), qd)
+    }
+
+    /// J̇ at a precomputed pose.
+    pub fn jacobian_dot_at(&self, p: &Pose, qd: Vector2<f64>) -> Matrix2<f64> {
         let (l1, l2) = (self.params.link1_length_m, self.params.link2_length_m);
-        let (s1, c1) = q[0].sin_cos();
-        let (s12, c12) = (q[0] + q[1]).sin_cos();
         let w1 = qd[0];
         let w12 = qd[0] + qd[1];
         Matrix2::new(
-            -l1 * c1 * w1 - l2 * c12 * w12,
-            -l2 * c12 * w12,
-            -l1 * s1 * w1 - l2 * s12 * w12,
-            -l2 * s12 * w12,
+            -l1 * p.c1 * w1 - l2 * p.c12 * w12,
+            -l2 * p.c12 * w12,
+            -l1 * p.s1 * w1 - l2 * p.s12 * w12,
+            -l2 * p.s12 * w12,
         )
     }
 
@@ -210,6 +248,12 @@ impl Arm {
 
     /// Inverse kinematics for the tip at `p` on the given elbow branch.
     pub fn inverse(&self, p: Vec2, elbow: Elbow) -> Result<Vector2<f64>, IkError> {
+        self.inverse_pose(p, elbow).map(|(q, _)| q)
+    }
+
+    /// Inverse kinematics that also returns the pose's trigonometry, obtained from the
+    /// geometry by the angle-difference formulas instead of sin/cos calls.
+    pub fn inverse_pose(&self, p: Vec2, elbow: Elbow) -> Result<(Vector2<f64>, Pose), IkError> {
         if !(p.x.is_finite() && p.y.is_finite()) {
             return Err(IkError::NotFinite);
         }
@@ -229,15 +273,30 @@ impl Arm {
             Elbow::Positive => (1.0 - c2 * c2).sqrt(),
             Elbow::Negative => -(1.0 - c2 * c2).sqrt(),
         };
-        let q2 = s2.atan2(c2);
-        let q1 = p.y.atan2(p.x) - (l2 * s2).atan2(l1 + l2 * c2);
-        Ok(Vector2::new(q1, q2))
+        let r = r2.sqrt();
+        if r == 0.0 {
+            return Err(IkError::OutOfReach { x: p.x, y: p.y, r, min: (l1 - l2).abs(), max: l1 + l2 });
+        }
+        // q1 = α − β with α the bearing of p and β the angle of the tip seen from link 1;
+        // |(l1 + l2 c2, l2 s2)| = r.
+        let (sa, ca) = (p.y / r, p.x / r);
+        let (sb, cb) = (l2 * s2 / r, (l1 + l2 * c2) / r);
+        let s1 = sa * cb - ca * sb;
+        let c1 = ca * cb + sa * sb;
+        let q = Vector2::new(s1.atan2(c1), s2.atan2(c2));
+        let pose = Pose { s1, c1, s2, c2, s12: s1 * c2 + c1 * s2, c12: c1 * c2 - s1 * s2 };
+        Ok((q, pose))
     }
 
     /// Joint-space inertia M(q).
     pub fn mass_matrix(&self, q: Vector2<f64>) -> Matrix2<f64> {
+        self.mass_matrix_at(&self.pose(q))
+    }
+
+    /// Joint-space inertia at a precomputed pose.
+    pub fn mass_matrix_at(&self, p: &Pose) -> Matrix2<f64> {
         let l1 = self.params.link1_length_m;
-        let c2 = q[1].cos();
+        let c2 = p.c2;
         let m11 = self.i1 + self.m2t * l1 * l1 + self.i2 + 2.0 * self.beta * c2;
         let m12 = self.i2 + self.beta * c2;
         Matrix2::new(m11, m12, m12, self.i2)
@@ -245,7 +304,12 @@ impl Arm {
 
     /// Coriolis and centrifugal torques h(q, q̇).
     pub fn coriolis(&self, q: Vector2<f64>, qd: Vector2<f64>) -> Vector2<f64> {
-        let s2 = q[1].sin();
+        self.coriolis_at(&self.pose(q), qd)
+    }
+
+    /// Coriolis and centrifugal torques at a precomputed pose.
+    pub fn coriolis_at(&self, p: &Pose, qd: Vector2<f64>) -> Vector2<f64> {
+        let s2 = p.s2;
         Vector2::new(
             -self.beta * s2 * (2.0 * qd[0] * qd[1] + qd[1] * qd[1]),
             self.beta * s2 * qd[0] * qd[0],
@@ -257,6 +321,12 @@ impl Arm {
         0.5 * qd.dot(&(self.mass_matrix(q) * qd))
     }
 
+    /// Inverse dynamics without contact: `M(q) q̈ + h(q, q̇) + B q̇` (N·m), at a pose.
+    pub fn inverse_dynamics_at(&self, p: &Pose, qd: Vector2<f64>, qdd: Vector2<f64>) -> Vector2<f64> {
+        let b = &self.params.joint_damping_nms_per_rad;
+        self.mass_matrix_at(p) * qdd + self.coriolis_at(p, qd) + Vector2::new(b[0] * qd[0], b[1] * qd[1])
+    }
+
     /// Joint accelerations for torques `tau` and a tip force `f_tip` (world, on the tool).
     pub fn acceleration(
         &self,
@@ -265,12 +335,17 @@ impl Arm {
         tau: Vector2<f64>,
         f_tip: Vec2,
     ) -> Vector2<f64> {
-        let m = self.mass_matrix(q);
+        self.acceleration_at(&self.pose(q), qd, tau, f_tip)
+    }
+
+    /// Joint accelerations at a precomputed pose.
+    pub fn acceleration_at(&self, p: &Pose, qd: Vector2<f64>, tau: Vector2<f64>, f_tip: Vec2) -> Vector2<f64> {
+        let m = self.mass_matrix_at(p);
         let damping = Vector2::new(
             self.params.joint_damping_nms_per_rad[0] * qd[0],
             self.params.joint_damping_nms_per_rad[1] * qd[1],
         );
-        let rhs = tau + self.jacobian(q).transpose() * f_tip - self.coriolis(q, qd) - damping;
+        let rhs = tau + self.jacobian_at(p).transpose() * f_tip - self.coriolis_at(p, qd) - damping;
         // M is symmetric positive definite: closed-form 2×2 solve.
         let det = m[(0, 0)] * m[(1, 1)] - m[(0, 1)] * m[(1, 0)];
         Vector2::new(
@@ -385,13 +460,15 @@ impl JointServo {
         Vector2::new(self.gains[0].ki * self.integral[0], self.gains[1].ki * self.integral[1])
     }
 
-    /// Torque for set-point (q_d, q̇_d) at measured (q, q̇); integrates over `dt`.
+    /// Torque for set-point (q_d, q̇_d) at measured (q, q̇) plus a feedforward torque;
+    /// integrates over `dt`. The sum saturates at the torque limits.
     pub fn torque(
         &mut self,
         q_d: Vector2<f64>,
         qd_d: Vector2<f64>,
         q: Vector2<f64>,
         qd: Vector2<f64>,
+        feedforward: Vector2<f64>,
         dt: f64,
     ) -> Vector2<f64> {
         let mut tau = Vector2::zeros();
@@ -399,13 +476,13 @@ impl JointServo {
             let g = self.gains[j];
             let e = q_d[j] - q[j];
             let ed = qd_d[j] - qd[j];
-            let unsat = g.kp * e + g.kd * ed + g.ki * (self.integral[j] + e * dt);
+            let unsat = g.kp * e + g.kd * ed + g.ki * (self.integral[j] + e * dt) + feedforward[j];
             let lim = self.torque_limit[j];
             // Conditional integration: do not wind up further into saturation.
             if unsat.abs() <= lim || unsat.signum() != e.signum() {
                 self.integral[j] += e * dt;
             }
-            let out = g.kp * e + g.kd * ed + g.ki * self.integral[j];
+            let out = g.kp * e + g.kd * ed + g.ki * self.integral[j] + feedforward[j];
             tau[j] = out.clamp(-lim, lim);
         }
         tau
@@ -426,8 +503,12 @@ mod tests {
         for &(x, y) in &[(0.4, 0.0), (0.3, 0.5), (-0.2, 0.6), (0.75, -0.1), (0.25, -0.1)] {
             for elbow in [Elbow::Positive, Elbow::Negative] {
                 let p = Vec2::new(x, y);
-                let q = a.inverse(p, elbow).unwrap();
+                let (q, pose) = a.inverse_pose(p, elbow).unwrap();
                 assert!((a.forward(q) - p).norm() < 1e-12, "{p:?} {elbow:?}");
+                let direct = a.pose(q);
+                for (x, y) in [(pose.s1, direct.s1), (pose.c1, direct.c1), (pose.s12, direct.s12), (pose.c12, direct.c12)] {
+                    assert!((x - y).abs() < 1e-12);
+                }
             }
         }
         assert!(matches!(a.inverse(Vec2::new(0.9, 0.0), Elbow::Positive), Err(IkError::OutOfReach { .. })));
@@ -536,11 +617,11 @@ mod tests {
         let mut s = JointServo::new([g, g], [1.0, 1.0]);
         let z = Vector2::zeros();
         for _ in 0..10000 {
-            let t = s.torque(Vector2::new(1.0, -1.0), z, z, z, 1e-3);
+            let t = s.torque(Vector2::new(1.0, -1.0), z, z, z, z, 1e-3);
             assert!(t[0] <= 1.0 && t[1] >= -1.0);
         }
         // Integrator did not wind up: error reversal reverses the torque at once.
-        let t = s.torque(Vector2::new(-0.1, 0.1), z, z, z, 1e-3);
+        let t = s.torque(Vector2::new(-0.1, 0.1), z, z, z, z, 1e-3);
         assert!(t[0] < 0.0 && t[1] > 0.0, "{t:?}");
     }
 }

@@ -10,7 +10,7 @@
 
 use crate::arm::{Arm, ArmParams, Elbow};
 use crate::friction::{FrictionLaw, Presliding, PreslidingParams, RoughnessMap};
-use crate::math::{Vec2, cross, unit};
+use crate::math::{Vec2, cross};
 use crate::sensor::Wrench;
 use crate::surface::{ContactLaw, Surface};
 use nalgebra::Vector2;
@@ -237,10 +237,11 @@ impl Plant {
 
     /// Contact and friction forces at the current state, advancing friction states by `dt`
     /// (0 leaves them). Returns the truth (without accelerations) and the tip force.
-    fn evaluate(&mut self, tau: Vector2<f64>, dt: f64) -> (PlantTruth, Vec2) {
+    fn evaluate(&mut self, tau: Vector2<f64>, dt: f64) -> (PlantTruth, Vector2<f64>) {
         let p = &self.params;
-        let tip = self.arm.forward(self.q);
-        let jac = self.arm.jacobian(self.q);
+        let pose = self.arm.pose(self.q);
+        let tip = self.arm.forward_at(&pose);
+        let jac = self.arm.jacobian_at(&pose);
         let vel = jac * self.qd;
         let contacts = self.surface.contacts(tip);
         let mut force = Vec2::zeros();
@@ -293,27 +294,25 @@ impl Plant {
         truth.contact_count = contacts.count;
         truth.normal_force_n = normal_sum;
         truth.contact_force = force;
-        let acc = self.arm.acceleration(self.q, self.qd, tau, force);
-        truth.tip_acceleration = jac * acc + self.arm.jacobian_dot(self.q, self.qd) * self.qd;
-        truth.sensor_wrench = self.sensor_wrench(force, truth.tip_acceleration);
-        (truth, force)
+        let acc = self.arm.acceleration_at(&pose, self.qd, tau, force);
+        truth.tip_acceleration = jac * acc + self.arm.jacobian_dot_at(&pose, self.qd) * self.qd;
+        truth.sensor_wrench = self.sensor_wrench(&pose, force, truth.tip_acceleration);
+        (truth, acc)
     }
 
     /// The wrench the sensor transmits: contact force minus the tool's inertial force, in the
     /// sensor frame, with the moment about the sensor origin (tool length behind the tip).
-    fn sensor_wrench(&self, contact_force: Vec2, tip_acc: Vec2) -> Wrench {
-        let phi = self.arm.link2_angle(self.q);
-        let xe = unit(phi);
+    fn sensor_wrench(&self, pose: &crate::arm::Pose, contact_force: Vec2, tip_acc: Vec2) -> Wrench {
+        let (s, c) = (pose.s12, pose.c12);
+        let xe = Vec2::new(c, s);
         let f = contact_force - tip_acc * self.params.tool_mass_kg;
         let moment = cross(xe * self.params.tool_length_m, f);
-        let (s, c) = phi.sin_cos();
         Wrench { force: Vec2::new(c * f.x + s * f.y, -s * f.x + c * f.y), torque: moment }
     }
 
     /// Advances the world by `dt` (s) under joint torques `tau` (N·m).
     pub fn step(&mut self, tau: Vector2<f64>, dt: f64) {
-        let (truth, force) = self.evaluate(tau, dt);
-        let acc = self.arm.acceleration(self.q, self.qd, tau, force);
+        let (truth, acc) = self.evaluate(tau, dt);
         self.qd += acc * dt;
         self.q += self.qd * dt;
         self.time_s += dt;
@@ -330,6 +329,8 @@ pub fn holding_torque(arm: &Arm, q: Vector2<f64>, f_tip: Vec2) -> Vector2<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    use crate::math::unit;
 
     fn world() -> (Plant, Vector2<f64>) {
         let params = PlantParams::default();

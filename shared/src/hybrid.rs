@@ -1,0 +1,300 @@
+//! Hybrid position/force control in task coordinates (thesis §3.2, fig. 3.4).
+//!
+//! Task frame at the contact: `x` into the environment along the estimated normal (−n̂),
+//! `y` along the estimated tangent t̂. The selection matrix `R = diag(1, 0)` gives x to the
+//! force controller and y to the position controller; each produces a position update and the
+//! two are combined into one Cartesian set-point, sent through inverse kinematics to the PID
+//! joint servos.
+//!
+//! * Force along x: a Hooke's-law position update, `ẋ_cmd = ω_f (F_d − F_N)/k̂`. The stiffness
+//!   k̂ is the estimated interaction stiffness k̂_e in series with the servo's own Cartesian
+//!   stiffness along the normal (the PID joints are far softer than a metal contact, so using
+//!   k̂_e alone would make the loop ω_f k_servo/k̂_e slow; see `docs/model.md`). With that k̂ the
+//!   force loop crosses over near ω_f. An over-estimate of k̂ makes it sluggish, an
+//!   under-estimate aggressive (thesis §3.2).
+//! * Position along y: the nominal trajectory (a tangential velocity reached with bounded
+//!   acceleration) plus the dither `d` of eq. 4.10.
+//!
+//! A new tangent estimate is fed forward by re-basing the frame at the current set-point.
+
+use crate::math::{Vec2, perp, unit};
+use serde::{Deserialize, Serialize};
+
+/// Settings of the hybrid controller.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct HybridParams {
+    /// Desired normal force (preload) F_d (N).
+    pub preload_n: f64,
+    /// Estimated interaction stiffness k̂_e (N/m).
+    pub stiffness_estimate_n_per_m: f64,
+    /// Force-loop crossover (Hz).
+    pub force_bandwidth_hz: f64,
+    /// Largest rate of the normal set-point (m/s).
+    pub max_normal_rate_m_per_s: f64,
+    /// Tangential acceleration limit of the nominal trajectory (m/s²).
+    pub tangential_acceleration_m_per_s2: f64,
+}
+
+impl Default for HybridParams {
+    fn default() -> Self {
+        Self {
+            preload_n: 2.5,
+            stiffness_estimate_n_per_m: 10e3,
+            force_bandwidth_hz: 1.5,
+            max_normal_rate_m_per_s: 0.02,
+            tangential_acceleration_m_per_s2: 0.2,
+        }
+    }
+}
+
+impl HybridParams {
+    /// Checks the settings.
+    pub fn validate(&self) -> Result<(), String> {
+        let pos = [
+            ("preload_n", self.preload_n),
+            ("stiffness_estimate_n_per_m", self.stiffness_estimate_n_per_m),
+            ("force_bandwidth_hz", self.force_bandwidth_hz),
+            ("max_normal_rate_m_per_s", self.max_normal_rate_m_per_s),
+            ("tangential_acceleration_m_per_s2", self.tangential_acceleration_m_per_s2),
+        ];
+        for (n, v) in pos {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("hybrid.{n} = {v} must be > 0"));
+            }
+        }
+        if self.preload_n > 100.0 {
+            return Err(format!(
+                "hybrid.preload_n = {} exceeds 100 N; the sensor is rated 130 N",
+                self.preload_n
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The task frame: origin and estimated tangent angle (rad, world).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct TaskFrame {
+    /// Origin (m, world).
+    pub origin: Vec2,
+    /// Estimated tangent angle from world X (rad).
+    pub tangent_angle: f64,
+    tangent: Vec2,
+}
+
+impl TaskFrame {
+    /// A frame at `origin` with tangent at `tangent_angle` (rad).
+    pub fn new(origin: Vec2, tangent_angle: f64) -> Self {
+        Self { origin, tangent_angle, tangent: unit(tangent_angle) }
+    }
+
+    /// Unit tangent t̂ (the task y axis).
+    pub fn tangent(&self) -> Vec2 {
+        self.tangent
+    }
+
+    /// Outward unit normal n̂ (the task x axis is −n̂).
+    pub fn normal(&self) -> Vec2 {
+        perp(self.tangent)
+    }
+}
+
+/// The hybrid controller's output for one tick.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct HybridCommand {
+    /// Cartesian set-point (m).
+    pub position: Vec2,
+    /// Cartesian set-point velocity (m/s).
+    pub velocity: Vec2,
+    /// Cartesian set-point acceleration (m/s²): nominal and dither, for inertia feedforward.
+    pub acceleration: Vec2,
+    /// Measured normal force F_N = F·n̂ (N).
+    pub normal_force_n: f64,
+    /// Measured tangential force F·t̂ (N).
+    pub tangential_force_n: f64,
+}
+
+/// Hybrid position/force controller state.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HybridController {
+    params: HybridParams,
+    frame: TaskFrame,
+    hooke_stiffness: f64,
+    /// Tangential position along t̂ from the origin (m).
+    s: f64,
+    /// Current nominal tangential velocity (m/s).
+    s_dot: f64,
+    /// Requested nominal tangential velocity (m/s).
+    v_target: f64,
+    /// Normal set-point along −n̂ (into the surface) from the origin (m).
+    depth: f64,
+    depth_rate: f64,
+}
+
+impl HybridController {
+    /// A controller whose set-point starts at the frame origin. `servo_normal_stiffness` is the
+    /// PID servo's Cartesian stiffness along the normal (N/m).
+    pub fn new(params: HybridParams, frame: TaskFrame, servo_normal_stiffness: f64) -> Self {
+        let ke = params.stiffness_estimate_n_per_m;
+        let ks = servo_normal_stiffness;
+        let hooke = if ks > 0.0 && ks.is_finite() { ke * ks / (ke + ks) } else { ke };
+        Self { params, frame, hooke_stiffness: hooke, s: 0.0, s_dot: 0.0, v_target: 0.0, depth: 0.0, depth_rate: 0.0 }
+    }
+
+    /// The settings.
+    pub fn params(&self) -> &HybridParams {
+        &self.params
+    }
+
+    /// Changes the desired normal force (N).
+    pub fn set_preload(&mut self, preload_n: f64) {
+        if preload_n.is_finite() && preload_n >= 0.0 {
+            self.params.preload_n = preload_n;
+        }
+    }
+
+    /// The stiffness used in the Hooke's-law update (N/m).
+    pub fn hooke_stiffness(&self) -> f64 {
+        self.hooke_stiffness
+    }
+
+    /// The task frame.
+    pub fn frame(&self) -> &TaskFrame {
+        &self.frame
+    }
+
+    /// Requests a nominal tangential velocity (m/s), reached at the acceleration limit.
+    pub fn set_velocity(&mut self, v: f64) {
+        if v.is_finite() {
+            self.v_target = v;
+        }
+    }
+
+    /// Requested nominal tangential velocity (m/s).
+    pub fn velocity_target(&self) -> f64 {
+        self.v_target
+    }
+
+    /// Current nominal tangential velocity (m/s).
+    pub fn nominal_velocity(&self) -> f64 {
+        self.s_dot
+    }
+
+    /// Stops tangential motion at once (safe state).
+    pub fn stop(&mut self) {
+        self.v_target = 0.0;
+        self.s_dot = 0.0;
+    }
+
+    /// The nominal set-point without dither (m).
+    pub fn nominal_point(&self) -> Vec2 {
+        self.frame.origin + self.frame.tangent() * self.s - self.frame.normal() * self.depth
+    }
+
+    /// Feeds forward a new tangent estimate (rad): the frame is re-based at the current
+    /// set-point so the command stays continuous.
+    pub fn set_tangent(&mut self, tangent_angle: f64) {
+        if !tangent_angle.is_finite() {
+            return;
+        }
+        let p = self.nominal_point();
+        self.frame = TaskFrame::new(p, tangent_angle);
+        self.s = 0.0;
+        self.depth = 0.0;
+    }
+
+    /// Moves the normal set-point by `delta` (m, + into the surface), e.g. to back off.
+    pub fn shift_depth(&mut self, delta: f64) {
+        if delta.is_finite() {
+            self.depth += delta;
+        }
+    }
+
+    /// One tick: `force` is the measured force on the tool (N, world), `dither` the dither
+    /// displacement, velocity and acceleration along the tangent; `force_control` false
+    /// freezes the force loop (used while the force data is not trusted).
+    pub fn step(&mut self, dt: f64, force: Vec2, dither: (f64, f64, f64), force_control: bool) -> HybridCommand {
+        let t = self.frame.tangent();
+        let n = self.frame.normal();
+        let f_n = force.dot(&n);
+        let f_t = force.dot(&t);
+        // Nominal trajectory along y.
+        let dv = self.v_target - self.s_dot;
+        let max_dv = self.params.tangential_acceleration_m_per_s2 * dt;
+        let dv = dv.clamp(-max_dv, max_dv);
+        let s_ddot = if dt > 0.0 { dv / dt } else { 0.0 };
+        self.s_dot += dv;
+        self.s += self.s_dot * dt;
+        // Hooke's-law force loop along x (selection R = diag(1, 0)).
+        self.depth_rate = if force_control {
+            let omega = std::f64::consts::TAU * self.params.force_bandwidth_hz;
+            let rate = omega * (self.params.preload_n - f_n) / self.hooke_stiffness;
+            let lim = self.params.max_normal_rate_m_per_s;
+            rate.clamp(-lim, lim)
+        } else {
+            0.0
+        };
+        self.depth += self.depth_rate * dt;
+        let position = self.frame.origin + t * (self.s + dither.0) - n * self.depth;
+        let velocity = t * (self.s_dot + dither.1) - n * self.depth_rate;
+        let acceleration = t * (s_ddot + dither.2);
+        HybridCommand { position, velocity, acceleration, normal_force_n: f_n, tangential_force_n: f_t }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Against a pure spring of stiffness k̂ (a rigid servo), the force loop is first order with
+    /// time constant 1/ω_f: after one time constant the error has fallen to 1/e.
+    #[test]
+    fn force_loop_is_first_order_against_its_model_stiffness() {
+        let params = HybridParams { max_normal_rate_m_per_s: 1.0, ..Default::default() };
+        let frame = TaskFrame::new(Vec2::zeros(), 0.0);
+        let mut c = HybridController::new(params, frame, f64::INFINITY);
+        let k = c.hooke_stiffness();
+        assert_eq!(k, 10e3);
+        let dt = 1e-4;
+        let tau = 1.0 / (std::f64::consts::TAU * params.force_bandwidth_hz);
+        let steps = (tau / dt).round() as usize;
+        let mut cmd = HybridCommand::default();
+        for _ in 0..steps {
+            // Environment: surface at y = 0, material below; push = k · depth.
+            let depth = (-cmd.position.y).max(0.0);
+            cmd = c.step(dt, Vec2::new(0.0, k * depth), (0.0, 0.0, 0.0), true);
+        }
+        let f = k * (-cmd.position.y);
+        let err = (2.5 - f) / 2.5;
+        assert!((err - (-1.0f64).exp()).abs() < 2e-3, "error fraction {err}");
+    }
+
+    #[test]
+    fn tangent_feed_forward_keeps_setpoint_continuous() {
+        let frame = TaskFrame::new(Vec2::new(0.4, 0.0), 0.0);
+        let mut c = HybridController::new(HybridParams::default(), frame, 1000.0);
+        c.set_velocity(0.02);
+        let mut last = Vec2::zeros();
+        for _ in 0..5000 {
+            last = c.step(1e-4, Vec2::new(0.0, 2.0), (0.0, 0.0, 0.0), true).position;
+        }
+        c.set_tangent(0.2);
+        let next = c.step(1e-4, Vec2::new(0.0, 2.0), (0.0, 0.0, 0.0), true).position;
+        assert!((next - last).norm() < 1e-5, "jump {:?}", next - last);
+        assert!((c.frame().tangent_angle - 0.2).abs() < 1e-15);
+    }
+
+    #[test]
+    fn nominal_velocity_respects_acceleration_limit() {
+        let frame = TaskFrame::new(Vec2::zeros(), 0.0);
+        let mut c = HybridController::new(HybridParams::default(), frame, 1000.0);
+        c.set_velocity(0.02);
+        c.step(1e-4, Vec2::zeros(), (0.0, 0.0, 0.0), false);
+        assert!((c.nominal_velocity() - 0.2 * 1e-4).abs() < 1e-15);
+        for _ in 0..2000 {
+            c.step(1e-4, Vec2::zeros(), (0.0, 0.0, 0.0), false);
+        }
+        assert!((c.nominal_velocity() - 0.02).abs() < 1e-15);
+    }
+}
