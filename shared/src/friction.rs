@@ -216,6 +216,44 @@ impl FrictionLaw {
             d_mean_square_da,
         }
     }
+
+    /// Cycle mean and mean square of eq. 4.5 by numerical quadrature (composite Gauss–Legendre
+    /// in θ on [0, π], split at the velocity reversal θ* = acos(−ẋ_o/a) and graded towards it so
+    /// every piece is smooth). An independent check of [`FrictionLaw::cycle`]; slow.
+    pub fn cycle_by_quadrature(&self, nominal: f64, a: f64) -> (f64, f64) {
+        let gl = crate::math::GaussLegendre::<20>::new();
+        let x0 = nominal;
+        let f = |th: f64| self.resistance(x0 + a * th.cos());
+        let mut mean = 0.0;
+        let mut mean_square = 0.0;
+        let mut piece = |lo: f64, hi: f64| {
+            mean += gl.integrate_composite(lo, hi, 8, f);
+            mean_square += gl.integrate_composite(lo, hi, 8, |t| f(t) * f(t));
+        };
+        if a > x0.abs() {
+            let ts = (-x0 / a).acos();
+            // Geometric grading towards ts from both sides.
+            let mut lo = 0.0;
+            let mut h = ts;
+            while h > 1e-9 {
+                h *= 0.5;
+                piece(lo, ts - h);
+                lo = ts - h;
+            }
+            piece(lo, ts);
+            let mut hi = PI;
+            let mut h = PI - ts;
+            while h > 1e-9 {
+                h *= 0.5;
+                piece(ts + h, hi);
+                hi = ts + h;
+            }
+            piece(ts, hi);
+        } else {
+            piece(0.0, PI);
+        }
+        (mean / PI, mean_square / PI)
+    }
 }
 
 /// Parameters of the presliding (bristle) state: eq. 4.1's spring `F_static = k_fric Δx`.
@@ -397,50 +435,9 @@ impl RoughnessMap {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::math::GaussLegendre;
 
     fn law() -> FrictionLaw {
         FrictionLaw::THESIS
-    }
-
-    /// Brute-force cycle statistics: composite Gauss–Legendre in θ on [0, π], split at the
-    /// velocity reversal θ* and graded towards it, so the quadrature sees only smooth pieces.
-    fn quadrature(law: &FrictionLaw, x0: f64, a: f64) -> (f64, f64) {
-        let gl = GaussLegendre::<20>::new();
-        let f = |th: f64| law.resistance(x0 + a * th.cos());
-        let mut pieces: Vec<(f64, f64)> = Vec::new();
-        if a > x0.abs() {
-            let ts = (-x0 / a).acos();
-            // Geometric grading towards ts from both sides.
-            let mut edges = vec![0.0];
-            let mut h = ts;
-            while h > 1e-9 {
-                h *= 0.5;
-                edges.push(ts - h);
-            }
-            edges.push(ts);
-            let mut h = PI - ts;
-            let mut right = vec![];
-            while h > 1e-9 {
-                h *= 0.5;
-                right.push(ts + h);
-            }
-            right.reverse();
-            edges.extend(right);
-            edges.push(PI);
-            for w in edges.windows(2) {
-                pieces.push((w[0], w[1]));
-            }
-        } else {
-            pieces.push((0.0, PI));
-        }
-        let mut m = 0.0;
-        let mut ms = 0.0;
-        for (lo, hi) in pieces {
-            m += gl.integrate_composite(lo, hi, 8, f);
-            ms += gl.integrate_composite(lo, hi, 8, |t| f(t) * f(t));
-        }
-        (m / PI, ms / PI)
     }
 
     /// Cycle mean and mean square agree with quadrature over both regimes (no reversal /
@@ -454,7 +451,7 @@ mod tests {
                     continue;
                 }
                 let st = law.cycle(x0, a);
-                let (m, ms) = quadrature(&law, x0, a);
+                let (m, ms) = law.cycle_by_quadrature(x0, a);
                 assert!(
                     (st.mean - m).abs() < 1e-9,
                     "mean at x0={x0} a={a}: closed {} vs quadrature {m}",

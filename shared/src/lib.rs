@@ -14,3 +14,4 @@ pub mod hybrid;
 pub mod servo;
 pub mod sim;
 pub mod ident;
+pub mod experiments;

@@ -4,7 +4,9 @@
 //! Each sample (at the sensor's own rate, default 7 kHz like an ATI Net F/T) is
 //! `quantize(saturate(lowpass(truth + bias + drift + noise)))`:
 //! * a fixed per-axis bias drawn once from the seed (uniform in ±`bias`);
-//! * a slow drift, a random walk of `drift_force_n_per_sqrt_s` per √s;
+//! * a slow thermal drift: its rate wanders as an Ornstein–Uhlenbeck process (standard
+//!   deviation `drift_rate_force_n_per_s`, correlation time `drift_correlation_s`), so the offset
+//!   changes smoothly (≈ rate × time over seconds), not like a random walk;
 //! * white Gaussian gauge noise, scaled so that the *output* (after the filter) has the
 //!   configured standard deviation;
 //! * a first-order low-pass with selectable cut-off (`y += α (x − y)`, `α = 1 − e^{−2π f_c / f_s}`),
@@ -42,8 +44,10 @@ pub struct SensorParams {
     pub bias_force_n: f64,
     /// Bias magnitude bound for the moment (N·m).
     pub bias_torque_nm: f64,
-    /// Force drift, random-walk intensity (N/√s).
-    pub drift_force_n_per_sqrt_s: f64,
+    /// Standard deviation of the force drift rate (N/s).
+    pub drift_rate_force_n_per_s: f64,
+    /// Correlation time of the drift rate (s).
+    pub drift_correlation_s: f64,
     /// Force resolution (N); 0 disables quantization.
     pub quantization_force_n: f64,
     /// Moment resolution (N·m); 0 disables quantization.
@@ -64,7 +68,8 @@ impl Default for SensorParams {
             noise_torque_nm: 0.0005,
             bias_force_n: 0.05,
             bias_torque_nm: 0.002,
-            drift_force_n_per_sqrt_s: 0.002,
+            drift_rate_force_n_per_s: 2e-4,
+            drift_correlation_s: 300.0,
             quantization_force_n: 1.0 / 40.0,
             quantization_torque_nm: 1.0 / 800.0,
             cutoff_hz: 326.0,
@@ -83,7 +88,7 @@ impl SensorParams {
             noise_torque_nm: 0.0,
             bias_force_n: 0.0,
             bias_torque_nm: 0.0,
-            drift_force_n_per_sqrt_s: 0.0,
+            drift_rate_force_n_per_s: 0.0,
             quantization_force_n: 0.0,
             quantization_torque_nm: 0.0,
             cutoff_hz: 0.0,
@@ -101,7 +106,7 @@ impl SensorParams {
             ("noise_torque_nm", self.noise_torque_nm),
             ("bias_force_n", self.bias_force_n),
             ("bias_torque_nm", self.bias_torque_nm),
-            ("drift_force_n_per_sqrt_s", self.drift_force_n_per_sqrt_s),
+            ("drift_rate_force_n_per_s", self.drift_rate_force_n_per_s),
             ("quantization_force_n", self.quantization_force_n),
             ("quantization_torque_nm", self.quantization_torque_nm),
             ("cutoff_hz", self.cutoff_hz),
@@ -118,7 +123,11 @@ impl SensorParams {
                 0.5 * self.rate_hz
             ));
         }
-        for (n, v) in [("range_force_n", self.range_force_n), ("range_torque_nm", self.range_torque_nm)] {
+        for (n, v) in [
+            ("range_force_n", self.range_force_n),
+            ("range_torque_nm", self.range_torque_nm),
+            ("drift_correlation_s", self.drift_correlation_s),
+        ] {
             if !(v.is_finite() && v > 0.0) {
                 return Err(format!("sensor.{n} = {v} must be > 0"));
             }
@@ -152,6 +161,7 @@ pub struct SensorModel {
     rng: ChaCha8Rng,
     bias: [f64; 3],
     drift: [f64; 3],
+    drift_rate: [f64; 2],
     filtered: [f64; 3],
     primed: bool,
     alpha: f64,
@@ -176,7 +186,7 @@ impl SensorModel {
             params.noise_force_n / gain,
             params.noise_torque_nm / gain,
         ];
-        Self { params, rng, bias, drift: [0.0; 3], filtered: [0.0; 3], primed: false, alpha, raw_noise }
+        Self { params, rng, bias, drift: [0.0; 3], drift_rate: [0.0; 2], filtered: [0.0; 3], primed: false, alpha, raw_noise }
     }
 
     /// The parameters.
@@ -192,13 +202,18 @@ impl SensorModel {
     /// Produces one reading of the true sensor-frame wrench.
     pub fn sample(&mut self, truth: Wrench) -> Reading {
         let p = self.params;
-        let step = (1.0 / p.rate_hz).sqrt();
+        let dt = 1.0 / p.rate_hz;
         let truth3 = [truth.force.x, truth.force.y, truth.torque];
         let mut raw = [0.0; 3];
         for k in 0..3 {
-            if k < 2 && p.drift_force_n_per_sqrt_s > 0.0 {
+            if k < 2 && p.drift_rate_force_n_per_s > 0.0 {
+                // Exact OU update of the drift rate, then integrate the offset.
+                let tau = p.drift_correlation_s;
+                let decay = (-dt / tau).exp();
                 let n: f64 = StandardNormal.sample(&mut self.rng);
-                self.drift[k] += p.drift_force_n_per_sqrt_s * step * n;
+                let r = &mut self.drift_rate[k];
+                *r = *r * decay + p.drift_rate_force_n_per_s * (1.0 - decay * decay).sqrt() * n;
+                self.drift[k] += *r * dt;
             }
             let noise = if self.raw_noise[k] > 0.0 {
                 let n: f64 = StandardNormal.sample(&mut self.rng);
@@ -247,7 +262,7 @@ mod tests {
     fn output_noise_matches_configuration() {
         let p = SensorParams {
             bias_force_n: 0.0,
-            drift_force_n_per_sqrt_s: 0.0,
+            drift_rate_force_n_per_s: 0.0,
             quantization_force_n: 0.0,
             ..SensorParams::default()
         };
@@ -294,6 +309,22 @@ mod tests {
         }
         assert!(r.saturated);
         assert!(r.wrench.force.x <= 130.0);
+    }
+
+    /// The drift rate is stationary with the configured standard deviation, so over a short
+    /// time the offset moves about rate × time.
+    #[test]
+    fn drift_rate_has_configured_spread() {
+        let p = SensorParams { noise_force_n: 0.0, bias_force_n: 0.0, quantization_force_n: 0.0, cutoff_hz: 0.0, drift_correlation_s: 1.0, ..SensorParams::default() };
+        let mut s = SensorModel::new(p, 5);
+        let n = 7000 * 400;
+        let mut sum2 = 0.0;
+        for _ in 0..n {
+            s.sample(Wrench::default());
+            sum2 += s.drift_rate[0].powi(2);
+        }
+        let sd = (sum2 / n as f64).sqrt();
+        assert!((sd - 2e-4).abs() < 0.1 * 2e-4, "{sd}");
     }
 
     #[test]

@@ -159,6 +159,7 @@ pub struct ServoCore {
     ctx: TunerContext,
     amplitude_bound: f64,
     tuning: bool,
+    force_control: bool,
     tare: Wrench,
     last_q_d: Vector2<f64>,
     diag: ServoDiag,
@@ -219,6 +220,7 @@ impl ServoCore {
             ctx,
             amplitude_bound,
             tuning: false,
+            force_control: true,
             tare: Wrench::default(),
             last_q_d: q0,
             diag: ServoDiag::default(),
@@ -284,6 +286,12 @@ impl ServoCore {
         self.dither.set_velocity_amplitude(a, self.amplitude_bound);
     }
 
+    /// Switches the normal force loop on or off (off holds the normal set-point, e.g. while the
+    /// tool is lifted off to re-zero the sensor).
+    pub fn set_force_control(&mut self, on: bool) {
+        self.force_control = on;
+    }
+
     /// Switches on-line tuning on or off (off holds the current Aω).
     pub fn set_tuning(&mut self, on: bool) {
         self.tuning = on;
@@ -314,7 +322,7 @@ impl ServoCore {
         let wrench = Wrench { force: inp.wrench.force - self.tare.force, torque: inp.wrench.torque - self.tare.torque };
         let force = if valid { Self::to_world_at(&pose, wrench) } else { Vec2::zeros() };
         let dither = self.dither.step(dt);
-        let cmd: HybridCommand = self.hybrid.step(dt, force, dither, valid);
+        let cmd: HybridCommand = self.hybrid.step(dt, force, dither, valid && self.force_control);
         let mut held = false;
         let (q_d, pose_d) = match self.arm.inverse_pose(cmd.position, self.elbow) {
             Ok(x) => x,

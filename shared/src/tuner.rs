@@ -59,7 +59,7 @@ pub struct CostTunerParams {
 
 impl Default for CostTunerParams {
     fn default() -> Self {
-        Self { oscillation_weight: 0.5, periods: 3, max_log_step: 0.35, adapt_gain: 0.5 }
+        Self { oscillation_weight: 0.5, periods: 3, max_log_step: 0.2, adapt_gain: 0.5 }
     }
 }
 
