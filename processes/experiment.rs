@@ -3,16 +3,30 @@
 
 use crate::plot;
 use afs_shared::experiments::{self, Options, Outcome};
+use afs_shared::sim::SimConfig;
 use anyhow::{Context, Result, bail};
 use serde::Serialize;
 use serde_json::{Value, json};
 use std::path::Path;
 use std::time::Instant;
 
+/// Reads a TOML set-up (any subset of `SimConfig`'s fields; the rest keep their defaults) and
+/// checks it.
+pub fn load_config(path: &Path) -> Result<SimConfig> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("reading config {}", path.display()))?;
+    let cfg: SimConfig =
+        toml::from_str(&text).with_context(|| format!("parsing config {}", path.display()))?;
+    cfg.validate()
+        .map_err(|e| anyhow::anyhow!("config {}: {e}", path.display()))?;
+    Ok(cfg)
+}
+
 /// The JSON report of one experiment: its name, the pass/fail of its checks, the measured
 /// summary, the plot path and timing (documented in docs/experiments.md).
 pub fn run(name: &str, opts: &Options, out_dir: &Path) -> Result<(Value, bool)> {
-    std::fs::create_dir_all(out_dir).with_context(|| format!("creating output directory {}", out_dir.display()))?;
+    std::fs::create_dir_all(out_dir)
+        .with_context(|| format!("creating output directory {}", out_dir.display()))?;
     let started = Instant::now();
     let cpu0 = cpu_seconds();
     let (report, figure, passed, simulated) = match name {
@@ -44,7 +58,9 @@ pub fn run(name: &str, opts: &Options, out_dir: &Path) -> Result<(Value, bool)> 
     Ok((obj, passed))
 }
 
-fn pack<S: Serialize>(r: Result<Outcome<S>, String>) -> Result<(Value, experiments::Figure, bool, f64)> {
+fn pack<S: Serialize>(
+    r: Result<Outcome<S>, String>,
+) -> Result<(Value, experiments::Figure, bool, f64)> {
     let o = r.map_err(anyhow::Error::msg)?;
     let passed = o.passed();
     let v = serde_json::to_value(&o).context("serialising the report")?;
@@ -54,7 +70,9 @@ fn pack<S: Serialize>(r: Result<Outcome<S>, String>) -> Result<(Value, experimen
 /// CPU time of this process (user + system), in seconds.
 pub fn cpu_seconds() -> f64 {
     // /proc/self/stat fields 14 and 15 are utime and stime in clock ticks (100 Hz on Linux).
-    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else { return 0.0 };
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+        return 0.0;
+    };
     let after = stat.rsplit_once(')').map(|(_, r)| r).unwrap_or("");
     let f: Vec<&str> = after.split_whitespace().collect();
     let ticks = |i: usize| f.get(i).and_then(|s| s.parse::<f64>().ok()).unwrap_or(0.0);

@@ -16,12 +16,21 @@ const COLORS: [RGBColor; 6] = [
 ];
 
 fn bounds(panel: &Panel, log_x: bool) -> Option<((f64, f64), (f64, f64))> {
-    let pts = panel.series.iter().flat_map(|s| s.points.iter()).filter(|p| p[0].is_finite() && p[1].is_finite());
+    let pts = panel
+        .series
+        .iter()
+        .flat_map(|s| s.points.iter())
+        .filter(|p| p[0].is_finite() && p[1].is_finite());
     let pts: Vec<&[f64; 2]> = pts.filter(|p| !log_x || p[0] > 0.0).collect();
     if pts.is_empty() {
         return None;
     }
-    let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+    let (mut x0, mut x1, mut y0, mut y1) = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
     for p in pts {
         x0 = x0.min(p[0]);
         x1 = x1.max(p[0]);
@@ -43,20 +52,34 @@ pub fn render(figure: &Figure, path: &Path) -> Result<()> {
     let root = root.titled(&figure.title, ("sans-serif", 18))?;
     let areas = root.split_evenly((figure.panels.len().max(1), 1));
     for (panel, area) in figure.panels.iter().zip(areas.iter()) {
-        let Some(((x0, x1), (y0, y1))) = bounds(panel, figure.log_x) else { continue };
+        let Some(((x0, x1), (y0, y1))) = bounds(panel, figure.log_x) else {
+            continue;
+        };
         let mut builder = ChartBuilder::on(area);
-        builder.margin(8).x_label_area_size(36).y_label_area_size(64);
+        builder
+            .margin(8)
+            .x_label_area_size(36)
+            .y_label_area_size(64);
         if figure.log_x {
             let mut chart = builder.build_cartesian_2d((x0..x1).log_scale(), y0..y1)?;
-            chart.configure_mesh().x_desc(&figure.x_label).y_desc(&panel.y_label).draw()?;
+            chart
+                .configure_mesh()
+                .x_desc(&figure.x_label)
+                .y_desc(&panel.y_label)
+                .draw()?;
             draw_series(&mut chart, panel, true)?;
         } else {
             let mut chart = builder.build_cartesian_2d(x0..x1, y0..y1)?;
-            chart.configure_mesh().x_desc(&figure.x_label).y_desc(&panel.y_label).draw()?;
+            chart
+                .configure_mesh()
+                .x_desc(&figure.x_label)
+                .y_desc(&panel.y_label)
+                .draw()?;
             draw_series(&mut chart, panel, false)?;
         }
     }
-    root.present().with_context(|| format!("writing plot {}", path.display()))?;
+    root.present()
+        .with_context(|| format!("writing plot {}", path.display()))?;
     Ok(())
 }
 

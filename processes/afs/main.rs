@@ -40,6 +40,10 @@ enum Command {
         /// fig4.6: use the six trials printed in the thesis.
         #[arg(long)]
         thesis_table: bool,
+        /// TOML file overriding the default set-up (plant, surface, sensor, servo); the
+        /// experiment's own settings apply on top.
+        #[arg(long)]
+        config: Option<PathBuf>,
     },
 }
 
@@ -56,9 +60,28 @@ fn main() -> ExitCode {
 fn run() -> Result<ExitCode> {
     let cli = Cli::parse();
     match cli.command {
-        Command::Experiment { name, out, seed, json, thesis_table } => {
-            let opts = Options { seed, thesis_table, ..Default::default() };
-            let names: Vec<&str> = if name == "all" { NAMES.to_vec() } else { vec![name.as_str()] };
+        Command::Experiment {
+            name,
+            out,
+            seed,
+            json,
+            thesis_table,
+            config,
+        } => {
+            let base = match &config {
+                Some(path) => experiment::load_config(path)?,
+                None => Default::default(),
+            };
+            let opts = Options {
+                seed,
+                thesis_table,
+                base,
+            };
+            let names: Vec<&str> = if name == "all" {
+                NAMES.to_vec()
+            } else {
+                vec![name.as_str()]
+            };
             let mut reports = Vec::new();
             let mut all_passed = true;
             for n in names {
@@ -70,10 +93,18 @@ fn run() -> Result<ExitCode> {
                 reports.push(report);
             }
             if json {
-                let v = if reports.len() == 1 { reports.pop().unwrap_or_default() } else { serde_json::Value::Array(reports) };
+                let v = if reports.len() == 1 {
+                    reports.pop().unwrap_or_default()
+                } else {
+                    serde_json::Value::Array(reports)
+                };
                 println!("{}", serde_json::to_string_pretty(&v)?);
             }
-            Ok(if all_passed { ExitCode::SUCCESS } else { ExitCode::from(1) })
+            Ok(if all_passed {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::from(1)
+            })
         }
     }
 }
@@ -82,7 +113,11 @@ fn print_human(r: &serde_json::Value) {
     println!(
         "{}: {} (plot {}, {:.1} s simulated in {:.2} s CPU)",
         r["experiment"].as_str().unwrap_or("?"),
-        if r["passed"].as_bool() == Some(true) { "PASS" } else { "FAIL" },
+        if r["passed"].as_bool() == Some(true) {
+            "PASS"
+        } else {
+            "FAIL"
+        },
         r["plot"].as_str().unwrap_or("?"),
         r["timing"]["simulated_s"].as_f64().unwrap_or(0.0),
         r["timing"]["cpu_s"].as_f64().unwrap_or(0.0),
@@ -91,7 +126,11 @@ fn print_human(r: &serde_json::Value) {
         for c in checks {
             println!(
                 "  [{}] {}: {:.4} {} {}",
-                if c["pass"].as_bool() == Some(true) { "ok" } else { "FAIL" },
+                if c["pass"].as_bool() == Some(true) {
+                    "ok"
+                } else {
+                    "FAIL"
+                },
                 c["name"].as_str().unwrap_or(""),
                 c["value"].as_f64().unwrap_or(f64::NAN),
                 c["relation"].as_str().unwrap_or(""),

@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 
 /// Physical parameters of the arm. SI units.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct ArmParams {
     /// Link 1 length l1 (m).
     pub link1_length_m: f64,
@@ -106,7 +106,9 @@ pub enum Elbow {
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 pub enum IkError {
     /// The point is outside the annulus the arm can reach.
-    #[error("point ({x:.4}, {y:.4}) m is out of reach (distance {r:.4} m not in [{min:.4}, {max:.4}])")]
+    #[error(
+        "point ({x:.4}, {y:.4}) m is out of reach (distance {r:.4} m not in [{min:.4}, {max:.4}])"
+    )]
     OutOfReach {
         /// X (m).
         x: f64,
@@ -150,7 +152,13 @@ impl Arm {
             + p.rotor2_inertia_kg_m2
             + p.tip_mass_kg * l2 * l2;
         let s2 = p.link2_mass_kg * p.link2_com_m + p.tip_mass_kg * l2;
-        Self { params, i1, i2, beta: l1 * s2, m2t: p.link2_mass_kg + p.tip_mass_kg }
+        Self {
+            params,
+            i1,
+            i2,
+            beta: l1 * s2,
+            m2t: p.link2_mass_kg + p.tip_mass_kg,
+        }
     }
 
     /// Checks the parameters.
@@ -173,8 +181,14 @@ impl Arm {
             ("link2_inertia_kg_m2", params.link2_inertia_kg_m2),
             ("rotor2_inertia_kg_m2", params.rotor2_inertia_kg_m2),
             ("tip_mass_kg", params.tip_mass_kg),
-            ("joint_damping_nms_per_rad[0]", params.joint_damping_nms_per_rad[0]),
-            ("joint_damping_nms_per_rad[1]", params.joint_damping_nms_per_rad[1]),
+            (
+                "joint_damping_nms_per_rad[0]",
+                params.joint_damping_nms_per_rad[0],
+            ),
+            (
+                "joint_damping_nms_per_rad[1]",
+                params.joint_damping_nms_per_rad[1],
+            ),
             ("torque_limit_nm[0]", params.torque_limit_nm[0]),
             ("torque_limit_nm[1]", params.torque_limit_nm[1]),
         ];
@@ -198,7 +212,14 @@ impl Arm {
         // sin/cos(q1+q2) by the addition formulas.
         let s12 = s1 * c2 + c1 * s2;
         let c12 = c1 * c2 - s1 * s2;
-        Pose { s1, c1, s2, c2, s12, c12 }
+        Pose {
+            s1,
+            c1,
+            s2,
+            c2,
+            s12,
+            c12,
+        }
     }
 
     /// Tip position (m).
@@ -220,7 +241,12 @@ impl Arm {
     /// Tip Jacobian at a precomputed pose.
     pub fn jacobian_at(&self, p: &Pose) -> Matrix2<f64> {
         let (l1, l2) = (self.params.link1_length_m, self.params.link2_length_m);
-        Matrix2::new(-l1 * p.s1 - l2 * p.s12, -l2 * p.s12, l1 * p.c1 + l2 * p.c12, l2 * p.c12)
+        Matrix2::new(
+            -l1 * p.s1 - l2 * p.s12,
+            -l2 * p.s12,
+            l1 * p.c1 + l2 * p.c12,
+            l2 * p.c12,
+        )
     }
 
     /// Time derivative of the Jacobian, J̇(q, q̇).
@@ -275,7 +301,13 @@ impl Arm {
         };
         let r = r2.sqrt();
         if r == 0.0 {
-            return Err(IkError::OutOfReach { x: p.x, y: p.y, r, min: (l1 - l2).abs(), max: l1 + l2 });
+            return Err(IkError::OutOfReach {
+                x: p.x,
+                y: p.y,
+                r,
+                min: (l1 - l2).abs(),
+                max: l1 + l2,
+            });
         }
         // q1 = α − β with α the bearing of p and β the angle of the tip seen from link 1;
         // |(l1 + l2 c2, l2 s2)| = r.
@@ -284,7 +316,14 @@ impl Arm {
         let s1 = sa * cb - ca * sb;
         let c1 = ca * cb + sa * sb;
         let q = Vector2::new(s1.atan2(c1), s2.atan2(c2));
-        let pose = Pose { s1, c1, s2, c2, s12: s1 * c2 + c1 * s2, c12: c1 * c2 - s1 * s2 };
+        let pose = Pose {
+            s1,
+            c1,
+            s2,
+            c2,
+            s12: s1 * c2 + c1 * s2,
+            c12: c1 * c2 - s1 * s2,
+        };
         Ok((q, pose))
     }
 
@@ -322,9 +361,16 @@ impl Arm {
     }
 
     /// Inverse dynamics without contact: `M(q) q̈ + h(q, q̇) + B q̇` (N·m), at a pose.
-    pub fn inverse_dynamics_at(&self, p: &Pose, qd: Vector2<f64>, qdd: Vector2<f64>) -> Vector2<f64> {
+    pub fn inverse_dynamics_at(
+        &self,
+        p: &Pose,
+        qd: Vector2<f64>,
+        qdd: Vector2<f64>,
+    ) -> Vector2<f64> {
         let b = &self.params.joint_damping_nms_per_rad;
-        self.mass_matrix_at(p) * qdd + self.coriolis_at(p, qd) + Vector2::new(b[0] * qd[0], b[1] * qd[1])
+        self.mass_matrix_at(p) * qdd
+            + self.coriolis_at(p, qd)
+            + Vector2::new(b[0] * qd[0], b[1] * qd[1])
     }
 
     /// Joint accelerations for torques `tau` and a tip force `f_tip` (world, on the tool).
@@ -339,7 +385,13 @@ impl Arm {
     }
 
     /// Joint accelerations at a precomputed pose.
-    pub fn acceleration_at(&self, p: &Pose, qd: Vector2<f64>, tau: Vector2<f64>, f_tip: Vec2) -> Vector2<f64> {
+    pub fn acceleration_at(
+        &self,
+        p: &Pose,
+        qd: Vector2<f64>,
+        tau: Vector2<f64>,
+        f_tip: Vec2,
+    ) -> Vector2<f64> {
         let m = self.mass_matrix_at(p);
         let damping = Vector2::new(
             self.params.joint_damping_nms_per_rad[0] * qd[0],
@@ -443,7 +495,11 @@ pub struct JointServo {
 impl JointServo {
     /// New servo with a zero integrator.
     pub fn new(gains: [PidGains; 2], torque_limit: [f64; 2]) -> Self {
-        Self { gains, torque_limit, integral: Vector2::zeros() }
+        Self {
+            gains,
+            torque_limit,
+            integral: Vector2::zeros(),
+        }
     }
 
     /// Presets the integrator so that, at zero error, the servo outputs `torque` (bumpless start
@@ -457,7 +513,10 @@ impl JointServo {
 
     /// The integrator's share of the torque (N·m).
     pub fn integral_torque(&self) -> Vector2<f64> {
-        Vector2::new(self.gains[0].ki * self.integral[0], self.gains[1].ki * self.integral[1])
+        Vector2::new(
+            self.gains[0].ki * self.integral[0],
+            self.gains[1].ki * self.integral[1],
+        )
     }
 
     /// Torque for set-point (q_d, q̇_d) at measured (q, q̇) plus a feedforward torque;
@@ -500,19 +559,36 @@ mod tests {
     #[test]
     fn kinematics_round_trip_on_both_branches() {
         let a = arm();
-        for &(x, y) in &[(0.4, 0.0), (0.3, 0.5), (-0.2, 0.6), (0.75, -0.1), (0.25, -0.1)] {
+        for &(x, y) in &[
+            (0.4, 0.0),
+            (0.3, 0.5),
+            (-0.2, 0.6),
+            (0.75, -0.1),
+            (0.25, -0.1),
+        ] {
             for elbow in [Elbow::Positive, Elbow::Negative] {
                 let p = Vec2::new(x, y);
                 let (q, pose) = a.inverse_pose(p, elbow).unwrap();
                 assert!((a.forward(q) - p).norm() < 1e-12, "{p:?} {elbow:?}");
                 let direct = a.pose(q);
-                for (x, y) in [(pose.s1, direct.s1), (pose.c1, direct.c1), (pose.s12, direct.s12), (pose.c12, direct.c12)] {
+                for (x, y) in [
+                    (pose.s1, direct.s1),
+                    (pose.c1, direct.c1),
+                    (pose.s12, direct.s12),
+                    (pose.c12, direct.c12),
+                ] {
                     assert!((x - y).abs() < 1e-12);
                 }
             }
         }
-        assert!(matches!(a.inverse(Vec2::new(0.9, 0.0), Elbow::Positive), Err(IkError::OutOfReach { .. })));
-        assert!(matches!(a.inverse(Vec2::new(f64::NAN, 0.0), Elbow::Positive), Err(IkError::NotFinite)));
+        assert!(matches!(
+            a.inverse(Vec2::new(0.9, 0.0), Elbow::Positive),
+            Err(IkError::OutOfReach { .. })
+        ));
+        assert!(matches!(
+            a.inverse(Vec2::new(f64::NAN, 0.0), Elbow::Positive),
+            Err(IkError::NotFinite)
+        ));
     }
 
     #[test]
@@ -548,7 +624,12 @@ mod tests {
             let jv1 = Matrix2::new(-p.link1_com_m * s1, 0.0, p.link1_com_m * c1, 0.0);
             let jel = Matrix2::new(-l1 * s1, 0.0, l1 * c1, 0.0);
             let lc2 = p.link2_com_m;
-            let jv2 = Matrix2::new(-l1 * s1 - lc2 * s12, -lc2 * s12, l1 * c1 + lc2 * c12, lc2 * c12);
+            let jv2 = Matrix2::new(
+                -l1 * s1 - lc2 * s12,
+                -lc2 * s12,
+                l1 * c1 + lc2 * c12,
+                lc2 * c12,
+            );
             let jt = a.jacobian(q);
             let w1 = Matrix2::new(1.0, 0.0, 0.0, 0.0);
             let w2 = Matrix2::new(1.0, 1.0, 1.0, 1.0);
@@ -558,7 +639,11 @@ mod tests {
                 + jv2.transpose() * jv2 * p.link2_mass_kg
                 + w2 * (p.link2_inertia_kg_m2 + p.rotor2_inertia_kg_m2)
                 + jt.transpose() * jt * p.tip_mass_kg;
-            assert!((m - a.mass_matrix(q)).norm() < 1e-12, "{m} vs {}", a.mass_matrix(q));
+            assert!(
+                (m - a.mass_matrix(q)).norm() < 1e-12,
+                "{m} vs {}",
+                a.mass_matrix(q)
+            );
         }
     }
 
@@ -566,17 +651,27 @@ mod tests {
     /// balance dE/dt = q̇ᵀτ holds (checked by RK4 integration).
     #[test]
     fn dynamics_conserve_energy() {
-        let mut params = ArmParams::default();
-        params.joint_damping_nms_per_rad = [0.0, 0.0];
+        let params = ArmParams {
+            joint_damping_nms_per_rad: [0.0, 0.0],
+            ..Default::default()
+        };
         let a = Arm::new(params);
-        let f = |q: Vector2<f64>, qd: Vector2<f64>| a.acceleration(q, qd, Vector2::zeros(), Vec2::zeros());
+        let f = |q: Vector2<f64>, qd: Vector2<f64>| {
+            a.acceleration(q, qd, Vector2::zeros(), Vec2::zeros())
+        };
         let (mut q, mut qd) = (Vector2::new(0.3, -1.0), Vector2::new(2.0, -3.0));
         let e0 = a.kinetic_energy(q, qd);
         let dt = 1e-4;
         for _ in 0..20000 {
             let k1 = (qd, f(q, qd));
-            let k2 = (qd + k1.1 * dt / 2.0, f(q + k1.0 * dt / 2.0, qd + k1.1 * dt / 2.0));
-            let k3 = (qd + k2.1 * dt / 2.0, f(q + k2.0 * dt / 2.0, qd + k2.1 * dt / 2.0));
+            let k2 = (
+                qd + k1.1 * dt / 2.0,
+                f(q + k1.0 * dt / 2.0, qd + k1.1 * dt / 2.0),
+            );
+            let k3 = (
+                qd + k2.1 * dt / 2.0,
+                f(q + k2.0 * dt / 2.0, qd + k2.1 * dt / 2.0),
+            );
             let k4 = (qd + k3.1 * dt, f(q + k3.0 * dt, qd + k3.1 * dt));
             q += (k1.0 + k2.0 * 2.0 + k3.0 * 2.0 + k4.0) * dt / 6.0;
             qd += (k1.1 + k2.1 * 2.0 + k3.1 * 2.0 + k4.1) * dt / 6.0;
@@ -595,7 +690,11 @@ mod tests {
         assert!((p - Vec2::new(0.4, 0.0)).norm() < 1e-12);
         let j = a.jacobian(q);
         assert!(j.column(0).dot(&j.column(1)).abs() < 1e-12);
-        assert!(a.mass_matrix(q)[(0, 1)].abs() < 1e-12, "M12 = {}", a.mass_matrix(q)[(0, 1)]);
+        assert!(
+            a.mass_matrix(q)[(0, 1)].abs() < 1e-12,
+            "M12 = {}",
+            a.mass_matrix(q)[(0, 1)]
+        );
         // Link 2 points along −Y: into a surface below the tip.
         assert!((a.link2_angle(q) + std::f64::consts::FRAC_PI_2).abs() < 1e-12);
     }
@@ -613,7 +712,11 @@ mod tests {
 
     #[test]
     fn servo_saturates_without_windup() {
-        let g = PidGains { kp: 100.0, ki: 1000.0, kd: 1.0 };
+        let g = PidGains {
+            kp: 100.0,
+            ki: 1000.0,
+            kd: 1.0,
+        };
         let mut s = JointServo::new([g, g], [1.0, 1.0]);
         let z = Vector2::zeros();
         for _ in 0..10000 {

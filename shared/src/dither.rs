@@ -26,7 +26,12 @@ pub struct DitherParams {
 
 impl Default for DitherParams {
     fn default() -> Self {
-        Self { frequency_hz: 10.0, max_amplitude_m: 3e-3, tangent_uncertainty_deg: 3.0, contact_margin: 0.8 }
+        Self {
+            frequency_hz: 10.0,
+            max_amplitude_m: 3e-3,
+            tangent_uncertainty_deg: 3.0,
+            contact_margin: 0.8,
+        }
     }
 }
 
@@ -35,7 +40,11 @@ impl DitherParams {
     pub fn amplitude_bound(&self, preload_n: f64, stiffness_n_per_m: f64) -> f64 {
         let depth = preload_n / stiffness_n_per_m;
         let s = self.tangent_uncertainty_deg.to_radians().sin();
-        let contact = if s > 0.0 { self.contact_margin * depth / s } else { f64::INFINITY };
+        let contact = if s > 0.0 {
+            self.contact_margin * depth / s
+        } else {
+            f64::INFINITY
+        };
         self.max_amplitude_m.min(contact)
     }
 
@@ -47,19 +56,33 @@ impl DitherParams {
     /// Checks the settings.
     pub fn validate(&self) -> Result<(), String> {
         if !(self.frequency_hz.is_finite() && self.frequency_hz > 0.0) {
-            return Err(format!("dither.frequency_hz = {} must be > 0", self.frequency_hz));
+            return Err(format!(
+                "dither.frequency_hz = {} must be > 0",
+                self.frequency_hz
+            ));
         }
         if !(self.max_amplitude_m.is_finite() && self.max_amplitude_m >= 0.0) {
-            return Err(format!("dither.max_amplitude_m = {} must be ≥ 0", self.max_amplitude_m));
+            return Err(format!(
+                "dither.max_amplitude_m = {} must be ≥ 0",
+                self.max_amplitude_m
+            ));
         }
-        if !(self.tangent_uncertainty_deg.is_finite() && (0.0..90.0).contains(&self.tangent_uncertainty_deg)) {
+        if !(self.tangent_uncertainty_deg.is_finite()
+            && (0.0..90.0).contains(&self.tangent_uncertainty_deg))
+        {
             return Err(format!(
                 "dither.tangent_uncertainty_deg = {} must lie in [0, 90)",
                 self.tangent_uncertainty_deg
             ));
         }
-        if !(self.contact_margin.is_finite() && self.contact_margin > 0.0 && self.contact_margin <= 1.0) {
-            return Err(format!("dither.contact_margin = {} must lie in (0, 1]", self.contact_margin));
+        if !(self.contact_margin.is_finite()
+            && self.contact_margin > 0.0
+            && self.contact_margin <= 1.0)
+        {
+            return Err(format!(
+                "dither.contact_margin = {} must lie in (0, 1]",
+                self.contact_margin
+            ));
         }
         Ok(())
     }
@@ -81,7 +104,14 @@ pub struct Dither {
 impl Dither {
     /// An oscillator at `frequency_hz`, amplitude zero, phase zero.
     pub fn new(frequency_hz: f64) -> Self {
-        Self { omega: TAU * frequency_hz, phase: 0.0, amplitude: 0.0, wrapped: false, sc: (0.0, 1.0), rot: (0.0, 1.0, 0.0) }
+        Self {
+            omega: TAU * frequency_hz,
+            phase: 0.0,
+            amplitude: 0.0,
+            wrapped: false,
+            sc: (0.0, 1.0),
+            rot: (0.0, 1.0, 0.0),
+        }
     }
 
     /// Angular frequency ω (rad/s).
@@ -106,7 +136,11 @@ impl Dither {
 
     /// Sets Aω (m/s), clamped to `[0, bound·ω]`.
     pub fn set_velocity_amplitude(&mut self, a_omega: f64, amplitude_bound: f64) {
-        let a = if a_omega.is_finite() { a_omega.max(0.0) / self.omega } else { 0.0 };
+        let a = if a_omega.is_finite() {
+            a_omega.max(0.0) / self.omega
+        } else {
+            0.0
+        };
         self.amplitude = a.min(amplitude_bound);
     }
 
@@ -152,7 +186,10 @@ mod tests {
         let b = p.amplitude_bound(2.5, 10e3);
         // 0.8 · 0.25 mm / sin 3° = 3.82 mm → the 3 mm absolute limit applies.
         assert!((b - 3e-3).abs() < 1e-12);
-        let p = DitherParams { tangent_uncertainty_deg: 10.0, ..p };
+        let p = DitherParams {
+            tangent_uncertainty_deg: 10.0,
+            ..p
+        };
         let b = p.amplitude_bound(2.5, 10e3);
         assert!((b * 10f64.to_radians().sin() - 0.8 * 2.5 / 10e3).abs() < 1e-12);
     }

@@ -13,7 +13,9 @@
 //! | `fig4.8`      | figs. 4.8–4.10    | on-line tuning from Aω = 0.2 ẋ_o, thesis tuner vs cost tuner   |
 
 use crate::friction::{FrictionLaw, RoughnessMap};
-use crate::ident::{CoefficientFit, FrictionFit, THESIS_FIG_4_6, fit_friction_coefficient, fit_friction_law};
+use crate::ident::{
+    CoefficientFit, FrictionFit, THESIS_FIG_4_6, fit_friction_coefficient, fit_friction_law,
+};
 use crate::sim::{Lockstep, SimConfig};
 use crate::tuner::{CostTunerParams, ThesisTunerParams, TunerConfig, TunerReport};
 use serde::Serialize;
@@ -31,7 +33,11 @@ pub struct Options {
 
 impl Default for Options {
     fn default() -> Self {
-        Self { seed: 1, base: SimConfig::default(), thesis_table: false }
+        Self {
+            seed: 1,
+            base: SimConfig::default(),
+            thesis_table: false,
+        }
     }
 }
 
@@ -88,10 +94,22 @@ pub struct Check {
 
 impl Check {
     fn at_most(name: impl Into<String>, value: f64, limit: f64) -> Self {
-        Self { name: name.into(), value, limit, relation: "<=", pass: value <= limit }
+        Self {
+            name: name.into(),
+            value,
+            limit,
+            relation: "<=",
+            pass: value <= limit,
+        }
     }
     fn at_least(name: impl Into<String>, value: f64, limit: f64) -> Self {
-        Self { name: name.into(), value, limit, relation: ">=", pass: value >= limit }
+        Self {
+            name: name.into(),
+            value,
+            limit,
+            relation: ">=",
+            pass: value >= limit,
+        }
     }
 }
 
@@ -139,7 +157,11 @@ struct Tick {
 fn record(sim: &Lockstep, last_phase: &mut f64) -> Tick {
     let d = sim.servo().diag();
     let tr = sim.truth();
-    let dir = if sim.servo().hybrid().velocity_target() < 0.0 { -1.0 } else { 1.0 };
+    let dir = if sim.servo().hybrid().velocity_target() < 0.0 {
+        -1.0
+    } else {
+        1.0
+    };
     let period_end = d.dither_phase < *last_phase;
     *last_phase = d.dither_phase;
     let f_ref = sim.plant().params().reference_normal_force_n;
@@ -191,16 +213,32 @@ pub struct WindowSummary {
 
 fn window(ticks: &[Tick], t0: f64, t1: f64) -> WindowSummary {
     // Align to period boundaries: from the first period end ≥ t0 to the last ≤ t1.
-    let start = ticks.iter().position(|k| k.t >= t0 && k.period_end).map(|i| i + 1).unwrap_or(0);
-    let end = ticks.iter().rposition(|k| k.t <= t1 && k.period_end).map(|i| i + 1).unwrap_or(ticks.len());
-    let w = if end > start { &ticks[start..end] } else { &ticks[..] };
+    let start = ticks
+        .iter()
+        .position(|k| k.t >= t0 && k.period_end)
+        .map(|i| i + 1)
+        .unwrap_or(0);
+    let end = ticks
+        .iter()
+        .rposition(|k| k.t <= t1 && k.period_end)
+        .map(|i| i + 1)
+        .unwrap_or(ticks.len());
+    let w = if end > start {
+        &ticks[start..end]
+    } else {
+        ticks
+    };
     let n = w.len().max(1) as f64;
     let mean = w.iter().map(|k| k.friction).sum::<f64>() / n;
     let var = w.iter().map(|k| (k.friction - mean).powi(2)).sum::<f64>() / n;
     let v0 = w.iter().map(|k| k.velocity).sum::<f64>() / n;
     let i = 2.0 * w.iter().map(|k| k.velocity * k.phase.cos()).sum::<f64>() / n;
     let q = 2.0 * w.iter().map(|k| k.velocity * k.phase.sin()).sum::<f64>() / n;
-    let (lo, hi) = w.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), k| (a.min(k.friction), b.max(k.friction)));
+    let (lo, hi) = w
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), k| {
+            (a.min(k.friction), b.max(k.friction))
+        });
     WindowSummary {
         mean_force_n: mean,
         std_force_n: var.sqrt(),
@@ -210,13 +248,21 @@ fn window(ticks: &[Tick], t0: f64, t1: f64) -> WindowSummary {
         mean_normal_n: w.iter().map(|k| k.normal).sum::<f64>() / n,
         friction_scale: w.iter().map(|k| k.scale).sum::<f64>() / n,
         peak_to_peak_n: hi - lo,
-        window_s: [w.first().map_or(0.0, |k| k.t), w.last().map_or(0.0, |k| k.t)],
+        window_s: [
+            w.first().map_or(0.0, |k| k.t),
+            w.last().map_or(0.0, |k| k.t),
+        ],
     }
 }
 
 /// Sliding statistics over `periods` whole periods, one point per period end: (t, mean, std).
 fn sliding_periods(ticks: &[Tick], periods: usize) -> Vec<[f64; 3]> {
-    let ends: Vec<usize> = ticks.iter().enumerate().filter(|(_, k)| k.period_end).map(|(i, _)| i).collect();
+    let ends: Vec<usize> = ticks
+        .iter()
+        .enumerate()
+        .filter(|(_, k)| k.period_end)
+        .map(|(i, _)| i)
+        .collect();
     let mut out = Vec::new();
     for w in ends.windows(periods + 1) {
         let s = &ticks[w[0] + 1..=w[periods]];
@@ -229,15 +275,27 @@ fn sliding_periods(ticks: &[Tick], periods: usize) -> Vec<[f64; 3]> {
 }
 
 fn decimate<F: Fn(&Tick) -> f64>(ticks: &[Tick], every: usize, f: F) -> Vec<[f64; 2]> {
-    ticks.iter().step_by(every.max(1)).map(|k| [k.t, f(k)]).collect()
+    ticks
+        .iter()
+        .step_by(every.max(1))
+        .map(|k| [k.t, f(k)])
+        .collect()
 }
 
 fn series(label: &str, points: Vec<[f64; 2]>) -> Series {
-    Series { label: label.into(), points, markers: false }
+    Series {
+        label: label.into(),
+        points,
+        markers: false,
+    }
 }
 
 fn markers(label: &str, points: Vec<[f64; 2]>) -> Series {
-    Series { label: label.into(), points, markers: true }
+    Series {
+        label: label.into(),
+        points,
+        markers: true,
+    }
 }
 
 fn config(opts: &Options, tuner: TunerConfig) -> SimConfig {
@@ -256,7 +314,9 @@ fn lift_and_retare(sim: &mut Lockstep) -> Option<f64> {
     let ramp = (0.2 / sim.dt()).round() as usize;
     sim.servo_mut().set_force_control(false);
     for _ in 0..ramp {
-        sim.servo_mut().hybrid_mut().shift_depth(-lift / ramp as f64);
+        sim.servo_mut()
+            .hybrid_mut()
+            .shift_depth(-lift / ramp as f64);
         sim.step();
     }
     sim.run((0.3 / sim.dt()).round() as usize);
@@ -272,7 +332,10 @@ fn lift_and_retare(sim: &mut Lockstep) -> Option<f64> {
         acc.torque += r.wrench.torque;
     }
     if free {
-        sim.servo_mut().set_tare(crate::sensor::Wrench { force: acc.force / n as f64, torque: acc.torque / n as f64 });
+        sim.servo_mut().set_tare(crate::sensor::Wrench {
+            force: acc.force / n as f64,
+            torque: acc.torque / n as f64,
+        });
     }
     for _ in 0..ramp {
         sim.servo_mut().hybrid_mut().shift_depth(lift / ramp as f64);
@@ -325,8 +388,10 @@ pub fn friction_id(opts: &Options) -> Result<Outcome<FrictionIdSummary>, String>
     let truth = cfg.plant.friction;
     let f_ref = cfg.plant.reference_normal_force_n;
     let mut sim = Lockstep::new(&cfg)?;
-    let speeds: [f64; 17] =
-        [0.001, 0.002, 0.003, 0.005, 0.007, 0.01, 0.015, 0.02, 0.03, 0.04, 0.05, 0.07, 0.1, 0.12, 0.15, 0.17, 0.2];
+    let speeds: [f64; 17] = [
+        0.001, 0.002, 0.003, 0.005, 0.007, 0.01, 0.015, 0.02, 0.03, 0.04, 0.05, 0.07, 0.1, 0.12,
+        0.15, 0.17, 0.2,
+    ];
     let accel = cfg.servo.hybrid.tangential_acceleration_m_per_s2;
     let mut levels = Vec::new();
     let mut strokes_plot = Vec::new();
@@ -358,13 +423,15 @@ pub fn friction_id(opts: &Options) -> Result<Outcome<FrictionIdSummary>, String>
                 sim.servo_mut().hybrid_mut().set_velocity(dir * v);
                 let n_total = (cruise / sim.dt()).round() as usize;
                 let n_skip = ((ramp + 0.05 + 0.1 * cruise) / sim.dt()).round() as usize;
-                let (mut f, mut ts, mut phi, mut vs, mut v2, mut c) = (crate::math::Vec2::zeros(), 0.0, 0.0, 0.0, 0.0, 0.0);
+                let (mut f, mut ts, mut phi, mut vs, mut v2, mut c) =
+                    (crate::math::Vec2::zeros(), 0.0, 0.0, 0.0, 0.0, 0.0);
                 for i in 0..n_total {
                     sim.step();
                     if i >= n_skip {
                         let d = *sim.servo().diag();
                         let frame = *sim.servo().hybrid().frame();
-                        f += frame.normal() * d.normal_force_n + frame.tangent() * d.tangential_force_n;
+                        f += frame.normal() * d.normal_force_n
+                            + frame.tangent() * d.tangential_force_n;
                         ts += sim.time();
                         let q = sim.plant().joints().0;
                         phi += q[0] + q[1];
@@ -378,7 +445,14 @@ pub fn friction_id(opts: &Options) -> Result<Outcome<FrictionIdSummary>, String>
                 sim.run(((ramp + 0.1) / sim.dt()).round() as usize);
                 if c > 0.0 {
                     let mv = vs / c;
-                    strokes.push(Stroke { t_mid: ts / c, force: f / c, phi: phi / c, dir, speed: mv, spread: (v2 / c - mv * mv).max(0.0).sqrt() });
+                    strokes.push(Stroke {
+                        t_mid: ts / c,
+                        force: f / c,
+                        phi: phi / c,
+                        dir,
+                        speed: mv,
+                        spread: (v2 / c - mv * mv).max(0.0).sqrt(),
+                    });
                 }
             }
             match lift_and_retare(&mut sim) {
@@ -394,7 +468,8 @@ pub fn friction_id(opts: &Options) -> Result<Outcome<FrictionIdSummary>, String>
                 let frac = (st.t_mid - tare_before.0) / span;
                 let (sn, cs) = st.phi.sin_cos();
                 let dw = drift * frac;
-                let drift_world = crate::math::Vec2::new(cs * dw.x - sn * dw.y, sn * dw.x + cs * dw.y);
+                let drift_world =
+                    crate::math::Vec2::new(cs * dw.x - sn * dw.y, sn * dw.x + cs * dw.y);
                 let corrected = st.force - drift_world;
                 let normal = corrected.dot(&frame.normal());
                 let friction = -corrected.dot(&frame.tangent()) * st.dir * f_ref / normal;
@@ -419,7 +494,10 @@ pub fn friction_id(opts: &Options) -> Result<Outcome<FrictionIdSummary>, String>
         rel(fit.law.kinetic_n, truth.kinetic_n),
         rel(fit.law.viscous_n_s_per_m, truth.viscous_n_s_per_m),
         rel(fit.law.stribeck_n, truth.stribeck_n),
-        rel(fit.law.stribeck_velocity_m_per_s, truth.stribeck_velocity_m_per_s),
+        rel(
+            fit.law.stribeck_velocity_m_per_s,
+            truth.stribeck_velocity_m_per_s,
+        ),
     ];
     let checks = vec![
         Check::at_most("sensor re-zeroing failures", retare_failures as f64, 0.0),
@@ -429,10 +507,12 @@ pub fn friction_id(opts: &Options) -> Result<Outcome<FrictionIdSummary>, String>
         Check::at_most("|x_s error| (fraction)", relative_error[3].abs(), 0.10),
     ];
     let curve = |law: FrictionLaw| -> Vec<[f64; 2]> {
-        (0..200).map(|k| {
-            let v = 5e-4 * (400f64).powf(k as f64 / 199.0);
-            [v * 1e3, law.resistance(v)]
-        }).collect()
+        (0..200)
+            .map(|k| {
+                let v = 5e-4 * (400f64).powf(k as f64 / 199.0);
+                [v * 1e3, law.resistance(v)]
+            })
+            .collect()
     };
     let figure = Figure {
         title: "friction-id: constant-velocity strokes and eq. 4.5".into(),
@@ -441,15 +521,28 @@ pub fn friction_id(opts: &Options) -> Result<Outcome<FrictionIdSummary>, String>
         panels: vec![Panel {
             y_label: "friction force (N)".into(),
             series: vec![
-                markers("strokes (measured)", strokes_plot.iter().map(|p| [p[0] * 1e3, p[1]]).collect()),
-                markers("level means", levels.iter().map(|p| [p[0] * 1e3, p[1]]).collect()),
+                markers(
+                    "strokes (measured)",
+                    strokes_plot.iter().map(|p| [p[0] * 1e3, p[1]]).collect(),
+                ),
+                markers(
+                    "level means",
+                    levels.iter().map(|p| [p[0] * 1e3, p[1]]).collect(),
+                ),
                 series("truth (eq. 4.23)", curve(truth)),
                 series("identified", curve(fit.law)),
             ],
         }],
     };
     Ok(Outcome {
-        summary: FrictionIdSummary { truth, fit, relative_error, levels, dropped_levels: dropped, retare_failures },
+        summary: FrictionIdSummary {
+            truth,
+            fit,
+            relative_error,
+            levels,
+            dropped_levels: dropped,
+            retare_failures,
+        },
         checks,
         simulated_s: sim.time(),
         figure,
@@ -491,7 +584,8 @@ pub fn fig4_5(opts: &Options) -> Result<Outcome<Fig45Summary>, String> {
     let ratio = 5.0;
     let mut cfg = config(opts, TunerConfig::Fixed);
     cfg.start_u_m = -0.5 * v * duration;
-    cfg.plant.roughness = RoughnessMap::random(opts.seed, cfg.start_u_m, v * duration, 12, 0.003, 0.4);
+    cfg.plant.roughness =
+        RoughnessMap::random(opts.seed, cfg.start_u_m, v * duration, 12, 0.003, 0.4);
     let mut runs = Vec::new();
     let mut traces = Vec::new();
     let mut simulated = 0.0;
@@ -516,21 +610,39 @@ pub fn fig4_5(opts: &Options) -> Result<Outcome<Fig45Summary>, String> {
     let gap = (on.mean_force_n - q_seen) / q_seen;
     let checks = vec![
         Check::at_most("dithered / undithered mean friction", mean_ratio, 0.20),
-        Check::at_most("|dithered mean − quadrature at seen velocity| / quadrature", gap.abs(), 0.15),
+        Check::at_most(
+            "|dithered mean − quadrature at seen velocity| / quadrature",
+            gap.abs(),
+            0.15,
+        ),
     ];
-    let running = |ticks: &[Tick]| -> Vec<[f64; 2]> { sliding_periods(ticks, 1).iter().map(|p| [p[0], p[1]]).collect() };
+    let running = |ticks: &[Tick]| -> Vec<[f64; 2]> {
+        sliding_periods(ticks, 1)
+            .iter()
+            .map(|p| [p[0], p[1]])
+            .collect()
+    };
     let figure = Figure {
-        title: format!("fig4.5: friction without and with dither (Aω = {ratio}·ẋ_o, ẋ_o = {} mm/s)", v * 1e3),
+        title: format!(
+            "fig4.5: friction without and with dither (Aω = {ratio}·ẋ_o, ẋ_o = {} mm/s)",
+            v * 1e3
+        ),
         x_label: "time (s)".into(),
         log_x: false,
         panels: vec![
             Panel {
                 y_label: "tangential force, no dither (N)".into(),
-                series: vec![series("measured", decimate(&traces[0], 10, |k| k.friction)), series("mean per period", running(&traces[0]))],
+                series: vec![
+                    series("measured", decimate(&traces[0], 10, |k| k.friction)),
+                    series("mean per period", running(&traces[0])),
+                ],
             },
             Panel {
                 y_label: "tangential force, dither (N)".into(),
-                series: vec![series("measured", decimate(&traces[1], 10, |k| k.friction)), series("mean per period", running(&traces[1]))],
+                series: vec![
+                    series("measured", decimate(&traces[1], 10, |k| k.friction)),
+                    series("mean per period", running(&traces[1])),
+                ],
             },
         ],
     };
@@ -576,7 +688,15 @@ pub struct Fig46Summary {
 /// 20 mm/s without dither; or, with `thesis_table`, from the six trials printed in fig. 4.6.
 pub fn fig4_6(opts: &Options) -> Result<Outcome<Fig46Summary>, String> {
     let (trials, simulated, true_mu, speed) = if opts.thesis_table {
-        (THESIS_FIG_4_6.iter().map(|&(a, b)| [a, b]).collect::<Vec<_>>(), 0.0, None, None)
+        (
+            THESIS_FIG_4_6
+                .iter()
+                .map(|&(a, b)| [a, b])
+                .collect::<Vec<_>>(),
+            0.0,
+            None,
+            None,
+        )
     } else {
         let cfg = config(opts, TunerConfig::Fixed);
         let mut sim = Lockstep::new(&cfg)?;
@@ -616,26 +736,49 @@ pub fn fig4_6(opts: &Options) -> Result<Outcome<Fig46Summary>, String> {
     if let Some(e) = relative_error {
         checks.push(Check::at_most("|μ − true μ| / true μ", e.abs(), 0.03));
     } else {
-        checks.push(Check::at_most("|μ − 0.709| (thesis table)", (fit.mu - 0.709).abs(), 0.0005));
+        checks.push(Check::at_most(
+            "|μ − 0.709| (thesis table)",
+            (fit.mu - 0.709).abs(),
+            0.0005,
+        ));
     }
     let fmax = trials.iter().map(|p| p[0]).fold(0.0, f64::max) * 1.1;
     let mut series_list = vec![
         markers("trials", trials.clone()),
-        series(&format!("F_t = {:.3}·F_N (mean of ratios)", fit.mu), vec![[0.0, 0.0], [fmax, fit.mu * fmax]]),
-        series(&format!("F_t = {:.3}·F_N (least squares)", fit.mu_least_squares), vec![[0.0, 0.0], [fmax, fit.mu_least_squares * fmax]]),
+        series(
+            &format!("F_t = {:.3}·F_N (mean of ratios)", fit.mu),
+            vec![[0.0, 0.0], [fmax, fit.mu * fmax]],
+        ),
+        series(
+            &format!("F_t = {:.3}·F_N (least squares)", fit.mu_least_squares),
+            vec![[0.0, 0.0], [fmax, fit.mu_least_squares * fmax]],
+        ),
     ];
     if let Some(m) = true_mu {
-        series_list.push(series(&format!("truth μ = {m:.3} at {:.1} mm/s", speed.unwrap_or(0.0) * 1e3), vec![[0.0, 0.0], [fmax, m * fmax]]));
+        series_list.push(series(
+            &format!("truth μ = {m:.3} at {:.1} mm/s", speed.unwrap_or(0.0) * 1e3),
+            vec![[0.0, 0.0], [fmax, m * fmax]],
+        ));
     }
     let figure = Figure {
-        title: format!("fig4.6: tangential vs normal force, coefficient of friction {:.3}", fit.mu),
+        title: format!(
+            "fig4.6: tangential vs normal force, coefficient of friction {:.3}",
+            fit.mu
+        ),
         x_label: "normal force F_N (N)".into(),
         log_x: false,
-        panels: vec![Panel { y_label: "tangential force F_t (N)".into(), series: series_list }],
+        panels: vec![Panel {
+            y_label: "tangential force F_t (N)".into(),
+            series: series_list,
+        }],
     };
     Ok(Outcome {
         summary: Fig46Summary {
-            source: if opts.thesis_table { "thesis-table" } else { "simulated" },
+            source: if opts.thesis_table {
+                "thesis-table"
+            } else {
+                "simulated"
+            },
             trials,
             coefficient: format!("{:.3}", fit.mu),
             fit,
@@ -697,26 +840,48 @@ pub fn fig4_7(opts: &Options) -> Result<Outcome<Fig47Summary>, String> {
         sim.servo_mut().set_a_omega(a * omega);
         run_recording(&mut sim, 1.0, &mut ticks, &mut ph);
         let w = window(&ticks, t0 + 0.2, sim.time());
-        let st = law.scaled(w.friction_scale).cycle(w.velocity_seen_m_per_s, w.a_omega_seen_m_per_s);
+        let st = law
+            .scaled(w.friction_scale)
+            .cycle(w.velocity_seen_m_per_s, w.a_omega_seen_m_per_s);
         let inertial = cfg.plant.tool_mass_kg * omega * w.a_omega_seen_m_per_s / 2f64.sqrt();
         let model_std = (st.std().powi(2) + inertial.powi(2)).sqrt();
-        steps.push(AmplitudeStep { amplitude_m: a, window: w, model_std_n: model_std });
+        steps.push(AmplitudeStep {
+            amplitude_m: a,
+            window: w,
+            model_std_n: model_std,
+        });
     }
     let undithered = steps[0].window.std_force_n.max(1e-9);
-    let smallest_dithered = steps.iter().skip(1).map(|s| s.window.std_force_n).fold(f64::INFINITY, f64::min);
+    let smallest_dithered = steps
+        .iter()
+        .skip(1)
+        .map(|s| s.window.std_force_n)
+        .fold(f64::INFINITY, f64::min);
     let worst_model_gap = steps
         .iter()
         .filter(|s| s.amplitude_m > 0.0)
         .map(|s| (s.window.std_force_n - s.model_std_n).abs() / s.model_std_n)
         .fold(0.0, f64::max);
     let checks = vec![
-        Check::at_least("smallest dithered σ / undithered σ", smallest_dithered / undithered, 10.0),
-        Check::at_most("worst |σ measured − σ model| / σ model", worst_model_gap, 0.25),
+        Check::at_least(
+            "smallest dithered σ / undithered σ",
+            smallest_dithered / undithered,
+            10.0,
+        ),
+        Check::at_most(
+            "worst |σ measured − σ model| / σ model",
+            worst_model_gap,
+            0.25,
+        ),
     ];
     let mut mean_removed = Vec::new();
     for (i, s) in steps.iter().enumerate() {
         let lo = i as f64;
-        for k in ticks.iter().filter(|k| k.t > lo && k.t <= lo + 1.0).step_by(5) {
+        for k in ticks
+            .iter()
+            .filter(|k| k.t > lo && k.t <= lo + 1.0)
+            .step_by(5)
+        {
             mean_removed.push([k.t, k.friction - s.window.mean_force_n]);
         }
     }
@@ -725,23 +890,44 @@ pub fn fig4_7(opts: &Options) -> Result<Outcome<Fig47Summary>, String> {
         x_label: "time (s)".into(),
         log_x: false,
         panels: vec![
-            Panel { y_label: "tangential force about its step mean (N)".into(), series: vec![series("measured", mean_removed)] },
+            Panel {
+                y_label: "tangential force about its step mean (N)".into(),
+                series: vec![series("measured", mean_removed)],
+            },
             Panel {
                 y_label: "std of tangential force (N)".into(),
                 series: vec![
-                    markers("measured", steps.iter().enumerate().map(|(i, s)| [i as f64 + 0.6, s.window.std_force_n]).collect()),
-                    markers("model", steps.iter().enumerate().map(|(i, s)| [i as f64 + 0.6, s.model_std_n]).collect()),
+                    markers(
+                        "measured",
+                        steps
+                            .iter()
+                            .enumerate()
+                            .map(|(i, s)| [i as f64 + 0.6, s.window.std_force_n])
+                            .collect(),
+                    ),
+                    markers(
+                        "model",
+                        steps
+                            .iter()
+                            .enumerate()
+                            .map(|(i, s)| [i as f64 + 0.6, s.model_std_n])
+                            .collect(),
+                    ),
                 ],
             },
             Panel {
                 y_label: "dither amplitude (mm)".into(),
-                series: vec![series("commanded", decimate(&ticks, 100, |k| k.a_cmd / omega * 1e3))],
+                series: vec![series(
+                    "commanded",
+                    decimate(&ticks, 100, |k| k.a_cmd / omega * 1e3),
+                )],
             },
         ],
     };
     Ok(Outcome {
         summary: Fig47Summary {
-            growth_ratio: steps.last().map_or(f64::NAN, |s| s.window.std_force_n) / steps[1].window.std_force_n,
+            growth_ratio: steps.last().map_or(f64::NAN, |s| s.window.std_force_n)
+                / steps[1].window.std_force_n,
             nominal_velocity_m_per_s: v,
             frequency_hz: cfg.servo.dither.frequency_hz,
             steps,
@@ -809,12 +995,27 @@ pub fn fig4_8(opts: &Options) -> Result<Outcome<Fig48Summary>, String> {
     let mut checks = Vec::new();
     let mut simulated = 0.0;
     let mut panels = vec![
-        Panel { y_label: "Aω (mm/s)".into(), series: vec![] },
-        Panel { y_label: "mean tangential force, 3 periods (N)".into(), series: vec![] },
-        Panel { y_label: "std of tangential force, 3 periods (N)".into(), series: vec![] },
-        Panel { y_label: "normal force (N)".into(), series: vec![] },
+        Panel {
+            y_label: "Aω (mm/s)".into(),
+            series: vec![],
+        },
+        Panel {
+            y_label: "mean tangential force, 3 periods (N)".into(),
+            series: vec![],
+        },
+        Panel {
+            y_label: "std of tangential force, 3 periods (N)".into(),
+            series: vec![],
+        },
+        Panel {
+            y_label: "normal force (N)".into(),
+            series: vec![],
+        },
     ];
-    for tuner in [TunerConfig::Thesis(ThesisTunerParams::default()), TunerConfig::Cost(CostTunerParams::default())] {
+    for tuner in [
+        TunerConfig::Thesis(ThesisTunerParams::default()),
+        TunerConfig::Cost(CostTunerParams::default()),
+    ] {
         let mut cfg = config(opts, tuner);
         cfg.start_u_m = -0.5 * v * duration;
         let preload = cfg.servo.hybrid.preload_n;
@@ -830,26 +1031,59 @@ pub fn fig4_8(opts: &Options) -> Result<Outcome<Fig48Summary>, String> {
         let name = sim.servo().tuner_name();
         let start = window(&ticks, 0.15, t_tune).mean_force_n;
         let sliding = sliding_periods(&ticks, 3);
-        let at5 = sliding.iter().filter(|p| p[0] <= t_tune + 5.0 + 1e-9).next_back().map_or(f64::NAN, |p| p[1]);
-        let quarter = sliding.iter().find(|p| p[0] > t_tune && p[1] < 0.25 * start).map(|p| p[0] - t_tune);
+        let at5 = sliding
+            .iter()
+            .rfind(|p| p[0] <= t_tune + 5.0 + 1e-9)
+            .map_or(f64::NAN, |p| p[1]);
+        let quarter = sliding
+            .iter()
+            .find(|p| p[0] > t_tune && p[1] < 0.25 * start)
+            .map(|p| p[0] - t_tune);
         let after: Vec<&Tick> = ticks.iter().filter(|k| k.t >= 0.5).collect();
-        let worst = after.iter().map(|k| (k.normal_true - preload).abs() / preload).fold(0.0, f64::max);
-        let worst_meas = after.iter().map(|k| (k.normal - preload).abs() / preload).fold(0.0, f64::max);
-        let min_normal = ticks.iter().map(|k| if k.contact { k.normal_true } else { 0.0 }).fold(f64::INFINITY, f64::min);
+        let worst = after
+            .iter()
+            .map(|k| (k.normal_true - preload).abs() / preload)
+            .fold(0.0, f64::max);
+        let worst_meas = after
+            .iter()
+            .map(|k| (k.normal - preload).abs() / preload)
+            .fold(0.0, f64::max);
+        let min_normal = ticks
+            .iter()
+            .map(|k| if k.contact { k.normal_true } else { 0.0 })
+            .fold(f64::INFINITY, f64::min);
         let last: Vec<&Tick> = ticks.iter().filter(|k| k.t > duration - 1.0).collect();
         let settled = last.iter().map(|k| k.a_cmd).sum::<f64>() / last.len().max(1) as f64;
         let rate = last.last().map_or(0.0, |k| k.a_cmd) - last.first().map_or(0.0, |k| k.a_cmd);
         let report = sim.servo().tuner_report();
         let bound = sim.servo().tuner_context().a_max;
         let why = explain(name, &report, settled, rate, bound, v, &cfg);
-        checks.push(Check::at_most(format!("{name}: mean at 5 s / start"), at5 / start, 0.25));
-        checks.push(Check::at_most(format!("{name}: worst |F_N − preload|/preload after 0.5 s"), worst, 0.10));
-        checks.push(Check::at_least(format!("{name}: smallest normal force (N), contact kept"), min_normal, 1e-6));
-        let ms = |s: &[[f64; 3]], i: usize| -> Vec<[f64; 2]> { s.iter().map(|p| [p[0], p[i]]).collect() };
-        panels[0].series.push(series(name, decimate(&ticks, 100, |k| k.a_cmd * 1e3)));
+        checks.push(Check::at_most(
+            format!("{name}: mean at 5 s / start"),
+            at5 / start,
+            0.25,
+        ));
+        checks.push(Check::at_most(
+            format!("{name}: worst |F_N − preload|/preload after 0.5 s"),
+            worst,
+            0.10,
+        ));
+        checks.push(Check::at_least(
+            format!("{name}: smallest normal force (N), contact kept"),
+            min_normal,
+            1e-6,
+        ));
+        let ms = |s: &[[f64; 3]], i: usize| -> Vec<[f64; 2]> {
+            s.iter().map(|p| [p[0], p[i]]).collect()
+        };
+        panels[0]
+            .series
+            .push(series(name, decimate(&ticks, 100, |k| k.a_cmd * 1e3)));
         panels[1].series.push(series(name, ms(&sliding, 1)));
         panels[2].series.push(series(name, ms(&sliding, 2)));
-        panels[3].series.push(series(name, decimate(&ticks, 20, |k| k.normal_true)));
+        panels[3]
+            .series
+            .push(series(name, decimate(&ticks, 20, |k| k.normal_true)));
         runs.push(TunerRun {
             tuner: name,
             start_mean_n: start,
@@ -869,11 +1103,17 @@ pub fn fig4_8(opts: &Options) -> Result<Outcome<Fig48Summary>, String> {
     }
     let preload = opts.base.servo.hybrid.preload_n;
     Ok(Outcome {
-        summary: Fig48Summary { nominal_velocity_m_per_s: v, preload_n: preload, runs },
+        summary: Fig48Summary {
+            nominal_velocity_m_per_s: v,
+            preload_n: preload,
+            runs,
+        },
         checks,
         simulated_s: simulated,
         figure: Figure {
-            title: "fig4.8: on-line dither tuning from Aω = 0.2·ẋ_o (thesis eq. 4.22 vs cost tuner)".into(),
+            title:
+                "fig4.8: on-line dither tuning from Aω = 0.2·ẋ_o (thesis eq. 4.22 vs cost tuner)"
+                    .into(),
             x_label: "time (s)".into(),
             log_x: false,
             panels,
@@ -881,11 +1121,22 @@ pub fn fig4_8(opts: &Options) -> Result<Outcome<Fig48Summary>, String> {
     })
 }
 
-fn explain(name: &str, r: &TunerReport, settled: f64, rate: f64, bound: f64, v: f64, cfg: &SimConfig) -> String {
+fn explain(
+    name: &str,
+    r: &TunerReport,
+    settled: f64,
+    rate: f64,
+    bound: f64,
+    v: f64,
+    cfg: &SimConfig,
+) -> String {
     match name {
         "thesis" => {
             let stop = if r.at_upper_bound {
-                format!("it stopped at the amplitude bound Aω = {:.1} mm/s", bound * 1e3)
+                format!(
+                    "it stopped at the amplitude bound Aω = {:.1} mm/s",
+                    bound * 1e3
+                )
             } else {
                 format!(
                     "it had not stopped: Aω = {:.1} mm/s and still rising at {:.1} mm/s per second; it stops only at the amplitude bound {:.1} mm/s",
@@ -932,7 +1183,11 @@ mod tests {
     /// The table path of fig4.6 needs no simulation and prints the thesis's coefficient.
     #[test]
     fn fig4_6_thesis_table_prints_0_709() {
-        let out = fig4_6(&Options { thesis_table: true, ..Default::default() }).unwrap();
+        let out = fig4_6(&Options {
+            thesis_table: true,
+            ..Default::default()
+        })
+        .unwrap();
         assert_eq!(out.summary.coefficient, "0.709");
         assert!(out.passed());
     }

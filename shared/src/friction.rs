@@ -22,7 +22,7 @@ use std::f64::consts::PI;
 /// Forces in N, velocities in m/s. All coefficients are magnitudes (the thesis prints
 /// `F_t = −1.6771` with its sign convention; the kinetic term enters here by magnitude).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct FrictionLaw {
     /// Kinetic (Coulomb) level F_t (N).
     pub kinetic_n: f64,
@@ -70,6 +70,13 @@ impl CycleStats {
     /// Standard deviation of F_f over the cycle (N).
     pub fn std(&self) -> f64 {
         (self.mean_square - self.mean * self.mean).max(0.0).sqrt()
+    }
+}
+
+impl Default for FrictionLaw {
+    /// The thesis's coefficients, [`FrictionLaw::THESIS`].
+    fn default() -> Self {
+        Self::THESIS
     }
 }
 
@@ -258,7 +265,7 @@ impl FrictionLaw {
 
 /// Parameters of the presliding (bristle) state: eq. 4.1's spring `F_static = k_fric Δx`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct PreslidingParams {
     /// Bristle stiffness k_fric = σ0 (N/m). Presliding deflection at break-away is
     /// `(F_t + F_s)/σ0`, a few µm for metal on metal.
@@ -387,7 +394,14 @@ pub struct RoughnessMap {
 impl RoughnessMap {
     /// A reproducible random set of `count` patches over `[start, start+length]` with widths in
     /// `[0.5, 2]·mean_half_width` and gains uniform in `[−max_gain/2, max_gain]` (mostly burrs).
-    pub fn random(seed: u64, start: f64, length: f64, count: usize, mean_half_width: f64, max_gain: f64) -> Self {
+    pub fn random(
+        seed: u64,
+        start: f64,
+        length: f64,
+        count: usize,
+        mean_half_width: f64,
+        max_gain: f64,
+    ) -> Self {
         use rand_chacha::ChaCha8Rng;
         use rand_chacha::rand_core::SeedableRng;
         use rand_distr::{Distribution, Uniform};
@@ -479,7 +493,11 @@ mod tests {
                 let dm = (p.mean - q.mean) / (2.0 * h);
                 let dms = (p.mean_square - q.mean_square) / (2.0 * h);
                 let tol = |v: f64| 1e-5 * v.abs().max(1.0);
-                assert!((st.d_mean_da - dm).abs() < tol(dm), "d mean at {x0},{a}: {} vs {dm}", st.d_mean_da);
+                assert!(
+                    (st.d_mean_da - dm).abs() < tol(dm),
+                    "d mean at {x0},{a}: {} vs {dm}",
+                    st.d_mean_da
+                );
                 assert!(
                     (st.d_mean_square_da - dms).abs() < tol(dms),
                     "d mean square at {x0},{a}: {} vs {dms}",
@@ -501,12 +519,41 @@ mod tests {
         }
         let st = law.cycle(0.0, 0.05);
         assert!(st.mean.abs() < 1e-12, "pure dither mean {}", st.mean);
-        let coulomb = FrictionLaw { stribeck_n: 0.0, viscous_n_s_per_m: 0.0, ..law };
+        let coulomb = FrictionLaw {
+            stribeck_n: 0.0,
+            viscous_n_s_per_m: 0.0,
+            ..law
+        };
         let st = coulomb.cycle(0.01, 0.05);
         let expected = 2.0 / PI * law.kinetic_n * (0.2f64).asin();
         assert!((st.mean - expected).abs() < 1e-12);
         // Pure Coulomb: F² ≡ F_t², the dither only moves force from the mean into the oscillation.
         assert!((st.mean_square - law.kinetic_n.powi(2)).abs() < 1e-12);
+    }
+
+    /// Below reversal the mean friction under dither follows the curvature of the Stribeck
+    /// term (Jensen): it falls where the curve is concave (|ẋ_o| < ẋ_s/√3) and *rises* where
+    /// it is convex. Prints the numbers quoted in docs/friction-suppression.md.
+    #[test]
+    fn sub_reversal_dither_follows_stribeck_curvature() {
+        let law = law();
+        for (x0, expected) in [
+            (0.002, -0.0081),
+            (0.005, -0.0122),
+            (0.01, 0.0370),
+            (0.02, 0.1005),
+        ] {
+            let rise = law.cycle(x0, 0.99 * x0).mean - law.resistance(x0);
+            println!(
+                "x0 = {:.0} mm/s, Aω = 0.99 x0: mean − undithered = {rise:+.4} N",
+                x0 * 1e3
+            );
+            assert!((rise - expected).abs() < 5e-4, "{x0}: {rise}");
+        }
+        assert!(
+            0.005 < law.stribeck_velocity_m_per_s / 3f64.sqrt()
+                && law.stribeck_velocity_m_per_s / 3f64.sqrt() < 0.01
+        );
     }
 
     /// Eq. 4.5 limits: Stribeck excess at zero speed, kinetic + viscous far above ẋ_s, odd symmetry.
@@ -526,12 +573,21 @@ mod tests {
 
     #[test]
     fn invalid_laws_are_rejected() {
-        let bad = FrictionLaw { stribeck_velocity_m_per_s: 0.0, ..law() };
+        let bad = FrictionLaw {
+            stribeck_velocity_m_per_s: 0.0,
+            ..law()
+        };
         assert!(bad.validate().is_err());
-        let bad = FrictionLaw { kinetic_n: f64::NAN, ..law() };
+        let bad = FrictionLaw {
+            kinetic_n: f64::NAN,
+            ..law()
+        };
         assert!(bad.validate().is_err());
         assert!(law().validate().is_ok());
-        let p = PreslidingParams { breakaway_ratio: 1.0, ..Default::default() };
+        let p = PreslidingParams {
+            breakaway_ratio: 1.0,
+            ..Default::default()
+        };
         assert!(p.validate().is_err());
     }
 
@@ -545,7 +601,11 @@ mod tests {
         for _ in 0..20000 {
             f = z.step(&law, &params, 0.02, 1e-4);
         }
-        assert!((f - law.resistance(0.02)).abs() < 1e-9, "{f} vs {}", law.resistance(0.02));
+        assert!(
+            (f - law.resistance(0.02)).abs() < 1e-9,
+            "{f} vs {}",
+            law.resistance(0.02)
+        );
     }
 
     /// A 1-DOF mass on the surface, driven through a spring, under a load oscillating below
@@ -582,7 +642,12 @@ mod tests {
     /// periodically; with strong damping it slides smoothly.
     #[test]
     fn stick_slip_appears_with_a_soft_lightly_damped_drive() {
-        let law = FrictionLaw { kinetic_n: 1.0, viscous_n_s_per_m: 0.0, stribeck_n: 0.8, stribeck_velocity_m_per_s: 0.01 };
+        let law = FrictionLaw {
+            kinetic_n: 1.0,
+            viscous_n_s_per_m: 0.0,
+            stribeck_n: 0.8,
+            stribeck_velocity_m_per_s: 0.01,
+        };
         let params = PreslidingParams::default();
         let run = |damping: f64| -> (f64, f64) {
             let (mass, k, drive) = (1.0, 200.0, 0.002);
@@ -604,9 +669,15 @@ mod tests {
             (vmin, vmax)
         };
         let (vmin, vmax) = run(0.5);
-        assert!(vmin < 0.1 * 0.002 && vmax > 5.0 * 0.002, "expected stick-slip, |v| in [{vmin}, {vmax}]");
+        assert!(
+            vmin < 0.1 * 0.002 && vmax > 5.0 * 0.002,
+            "expected stick-slip, |v| in [{vmin}, {vmax}]"
+        );
         let (vmin, vmax) = run(200.0);
-        assert!(vmin > 0.5 * 0.002 && vmax < 2.0 * 0.002, "expected smooth sliding, |v| in [{vmin}, {vmax}]");
+        assert!(
+            vmin > 0.5 * 0.002 && vmax < 2.0 * 0.002,
+            "expected smooth sliding, |v| in [{vmin}, {vmax}]"
+        );
     }
 
     #[test]
@@ -616,7 +687,13 @@ mod tests {
         assert_eq!(a, b);
         let flat = RoughnessMap::default();
         assert_eq!(flat.factor(0.3), 1.0);
-        let one = RoughnessMap { patches: vec![RoughnessPatch { centre_m: 0.0, half_width_m: 0.01, gain: 0.5 }] };
+        let one = RoughnessMap {
+            patches: vec![RoughnessPatch {
+                centre_m: 0.0,
+                half_width_m: 0.01,
+                gain: 0.5,
+            }],
+        };
         assert!((one.factor(0.0) - 1.5).abs() < 1e-12);
         assert_eq!(one.factor(0.02), 1.0);
         // Mean of cos² bump over its support is 1/2.

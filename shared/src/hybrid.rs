@@ -53,10 +53,16 @@ impl HybridParams {
     pub fn validate(&self) -> Result<(), String> {
         let pos = [
             ("preload_n", self.preload_n),
-            ("stiffness_estimate_n_per_m", self.stiffness_estimate_n_per_m),
+            (
+                "stiffness_estimate_n_per_m",
+                self.stiffness_estimate_n_per_m,
+            ),
             ("force_bandwidth_hz", self.force_bandwidth_hz),
             ("max_normal_rate_m_per_s", self.max_normal_rate_m_per_s),
-            ("tangential_acceleration_m_per_s2", self.tangential_acceleration_m_per_s2),
+            (
+                "tangential_acceleration_m_per_s2",
+                self.tangential_acceleration_m_per_s2,
+            ),
         ];
         for (n, v) in pos {
             if !(v.is_finite() && v > 0.0) {
@@ -86,7 +92,11 @@ pub struct TaskFrame {
 impl TaskFrame {
     /// A frame at `origin` with tangent at `tangent_angle` (rad).
     pub fn new(origin: Vec2, tangent_angle: f64) -> Self {
-        Self { origin, tangent_angle, tangent: unit(tangent_angle) }
+        Self {
+            origin,
+            tangent_angle,
+            tangent: unit(tangent_angle),
+        }
     }
 
     /// Unit tangent t̂ (the task y axis).
@@ -138,8 +148,21 @@ impl HybridController {
     pub fn new(params: HybridParams, frame: TaskFrame, servo_normal_stiffness: f64) -> Self {
         let ke = params.stiffness_estimate_n_per_m;
         let ks = servo_normal_stiffness;
-        let hooke = if ks > 0.0 && ks.is_finite() { ke * ks / (ke + ks) } else { ke };
-        Self { params, frame, hooke_stiffness: hooke, s: 0.0, s_dot: 0.0, v_target: 0.0, depth: 0.0, depth_rate: 0.0 }
+        let hooke = if ks > 0.0 && ks.is_finite() {
+            ke * ks / (ke + ks)
+        } else {
+            ke
+        };
+        Self {
+            params,
+            frame,
+            hooke_stiffness: hooke,
+            s: 0.0,
+            s_dot: 0.0,
+            v_target: 0.0,
+            depth: 0.0,
+            depth_rate: 0.0,
+        }
     }
 
     /// The settings.
@@ -214,7 +237,13 @@ impl HybridController {
     /// One tick: `force` is the measured force on the tool (N, world), `dither` the dither
     /// displacement, velocity and acceleration along the tangent; `force_control` false
     /// freezes the force loop (used while the force data is not trusted).
-    pub fn step(&mut self, dt: f64, force: Vec2, dither: (f64, f64, f64), force_control: bool) -> HybridCommand {
+    pub fn step(
+        &mut self,
+        dt: f64,
+        force: Vec2,
+        dither: (f64, f64, f64),
+        force_control: bool,
+    ) -> HybridCommand {
         let t = self.frame.tangent();
         let n = self.frame.normal();
         let f_n = force.dot(&n);
@@ -239,7 +268,13 @@ impl HybridController {
         let position = self.frame.origin + t * (self.s + dither.0) - n * self.depth;
         let velocity = t * (self.s_dot + dither.1) - n * self.depth_rate;
         let acceleration = t * (s_ddot + dither.2);
-        HybridCommand { position, velocity, acceleration, normal_force_n: f_n, tangential_force_n: f_t }
+        HybridCommand {
+            position,
+            velocity,
+            acceleration,
+            normal_force_n: f_n,
+            tangential_force_n: f_t,
+        }
     }
 }
 
@@ -251,7 +286,10 @@ mod tests {
     /// time constant 1/ω_f: after one time constant the error has fallen to 1/e.
     #[test]
     fn force_loop_is_first_order_against_its_model_stiffness() {
-        let params = HybridParams { max_normal_rate_m_per_s: 1.0, ..Default::default() };
+        let params = HybridParams {
+            max_normal_rate_m_per_s: 1.0,
+            ..Default::default()
+        };
         let frame = TaskFrame::new(Vec2::zeros(), 0.0);
         let mut c = HybridController::new(params, frame, f64::INFINITY);
         let k = c.hooke_stiffness();
@@ -277,10 +315,14 @@ mod tests {
         c.set_velocity(0.02);
         let mut last = Vec2::zeros();
         for _ in 0..5000 {
-            last = c.step(1e-4, Vec2::new(0.0, 2.0), (0.0, 0.0, 0.0), true).position;
+            last = c
+                .step(1e-4, Vec2::new(0.0, 2.0), (0.0, 0.0, 0.0), true)
+                .position;
         }
         c.set_tangent(0.2);
-        let next = c.step(1e-4, Vec2::new(0.0, 2.0), (0.0, 0.0, 0.0), true).position;
+        let next = c
+            .step(1e-4, Vec2::new(0.0, 2.0), (0.0, 0.0, 0.0), true)
+            .position;
         assert!((next - last).norm() < 1e-5, "jump {:?}", next - last);
         assert!((c.frame().tangent_angle - 0.2).abs() < 1e-15);
     }

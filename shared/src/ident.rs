@@ -30,7 +30,9 @@ pub enum IdentError {
     #[error("data point {0} is not usable (non-finite, or speed / normal force ≤ 0)")]
     BadPoint(usize),
     /// The speeds do not span enough range to separate the terms.
-    #[error("speeds span only {ratio:.1}×; the Stribeck and viscous terms need ≥ 20× (e.g. 1 mm/s to 200 mm/s)")]
+    #[error(
+        "speeds span only {ratio:.1}×; the Stribeck and viscous terms need ≥ 20× (e.g. 1 mm/s to 200 mm/s)"
+    )]
     NarrowRange {
         /// max/min speed.
         ratio: f64,
@@ -69,14 +71,20 @@ fn linear_fit(data: &[(f64, f64)], xs: f64) -> Option<(Vector3<f64>, f64)> {
     }
     let c = ata.cholesky()?.solve(&atb);
     let coef = c.component_mul(&scale);
-    let sse: f64 = data.iter().map(|&(v, f)| (basis(v, xs).dot(&coef) - f).powi(2)).sum();
+    let sse: f64 = data
+        .iter()
+        .map(|&(v, f)| (basis(v, xs).dot(&coef) - f).powi(2))
+        .sum();
     Some((coef, sse))
 }
 
 /// Fits eq. 4.5 to (speed m/s > 0, friction magnitude N) pairs.
 pub fn fit_friction_law(data: &[(f64, f64)]) -> Result<FrictionFit, IdentError> {
     if data.len() < 5 {
-        return Err(IdentError::TooFewPoints { needed: 5, got: data.len() });
+        return Err(IdentError::TooFewPoints {
+            needed: 5,
+            got: data.len(),
+        });
     }
     for (i, &(v, f)) in data.iter().enumerate() {
         if !(v.is_finite() && f.is_finite() && v > 0.0) {
@@ -88,12 +96,21 @@ pub fn fit_friction_law(data: &[(f64, f64)]) -> Result<FrictionFit, IdentError> 
     if vmax / vmin < 20.0 {
         return Err(IdentError::NarrowRange { ratio: vmax / vmin });
     }
-    let sse_at = |log_xs: f64| linear_fit(data, log_xs.exp()).map(|r| r.1).unwrap_or(f64::INFINITY);
+    let sse_at = |log_xs: f64| {
+        linear_fit(data, log_xs.exp())
+            .map(|r| r.1)
+            .unwrap_or(f64::INFINITY)
+    };
     let (log_xs, _) = grid_then_golden((vmin / 10.0).ln(), (vmax * 2.0).ln(), 200, 80, sse_at);
     let xs = log_xs.exp();
     let (c, sse) = linear_fit(data, xs).ok_or(IdentError::Singular)?;
     Ok(FrictionFit {
-        law: FrictionLaw { kinetic_n: c[0], viscous_n_s_per_m: c[1], stribeck_n: c[2], stribeck_velocity_m_per_s: xs },
+        law: FrictionLaw {
+            kinetic_n: c[0],
+            viscous_n_s_per_m: c[1],
+            stribeck_n: c[2],
+            stribeck_velocity_m_per_s: xs,
+        },
         rms_residual_n: (sse / data.len() as f64).sqrt(),
         points: data.len(),
     })
@@ -126,15 +143,38 @@ pub fn fit_friction_coefficient(pairs: &[(f64, f64)]) -> Result<CoefficientFit, 
     }
     let n = pairs.len() as f64;
     let mu = pairs.iter().map(|&(a, b)| b / a).sum::<f64>() / n;
-    let rr = (pairs.iter().map(|&(a, b)| (b / a - mu).powi(2)).sum::<f64>() / n).sqrt();
-    let mu_ls = pairs.iter().map(|&(a, b)| a * b).sum::<f64>() / pairs.iter().map(|&(a, _)| a * a).sum::<f64>();
-    let rf = (pairs.iter().map(|&(a, b)| (b - mu_ls * a).powi(2)).sum::<f64>() / n).sqrt();
-    Ok(CoefficientFit { mu, rms_ratio_residual: rr, mu_least_squares: mu_ls, rms_force_residual_n: rf, trials: pairs.len() })
+    let rr = (pairs
+        .iter()
+        .map(|&(a, b)| (b / a - mu).powi(2))
+        .sum::<f64>()
+        / n)
+        .sqrt();
+    let mu_ls = pairs.iter().map(|&(a, b)| a * b).sum::<f64>()
+        / pairs.iter().map(|&(a, _)| a * a).sum::<f64>();
+    let rf = (pairs
+        .iter()
+        .map(|&(a, b)| (b - mu_ls * a).powi(2))
+        .sum::<f64>()
+        / n)
+        .sqrt();
+    Ok(CoefficientFit {
+        mu,
+        rms_ratio_residual: rr,
+        mu_least_squares: mu_ls,
+        rms_force_residual_n: rf,
+        trials: pairs.len(),
+    })
 }
 
 /// The six trials printed in fig. 4.6: (F_N, F_t) in N.
-pub const THESIS_FIG_4_6: [(f64, f64); 6] =
-    [(1.750, 1.179), (2.015, 1.462), (2.156, 1.425), (2.645, 1.840), (3.886, 2.813), (5.263, 4.084)];
+pub const THESIS_FIG_4_6: [(f64, f64); 6] = [
+    (1.750, 1.179),
+    (2.015, 1.462),
+    (2.156, 1.425),
+    (2.645, 1.840),
+    (3.886, 2.813),
+    (5.263, 4.084),
+];
 
 #[cfg(test)]
 mod tests {
@@ -144,7 +184,9 @@ mod tests {
     #[test]
     fn identification_is_exact_on_noise_free_data() {
         let truth = FrictionLaw::THESIS;
-        let speeds = [0.001, 0.002, 0.003, 0.005, 0.007, 0.01, 0.015, 0.02, 0.03, 0.05, 0.07, 0.1, 0.15, 0.2];
+        let speeds = [
+            0.001, 0.002, 0.003, 0.005, 0.007, 0.01, 0.015, 0.02, 0.03, 0.05, 0.07, 0.1, 0.15, 0.2,
+        ];
         let data: Vec<(f64, f64)> = speeds.iter().map(|&v| (v, truth.resistance(v))).collect();
         let fit = fit_friction_law(&data).unwrap();
         let l = fit.law;
@@ -161,9 +203,15 @@ mod tests {
 
     #[test]
     fn bad_identification_input_is_refused() {
-        assert!(matches!(fit_friction_law(&[(0.01, 1.0); 3]), Err(IdentError::TooFewPoints { .. })));
+        assert!(matches!(
+            fit_friction_law(&[(0.01, 1.0); 3]),
+            Err(IdentError::TooFewPoints { .. })
+        ));
         let narrow: Vec<(f64, f64)> = (1..8).map(|k| (0.01 + 0.001 * k as f64, 1.0)).collect();
-        assert!(matches!(fit_friction_law(&narrow), Err(IdentError::NarrowRange { .. })));
+        assert!(matches!(
+            fit_friction_law(&narrow),
+            Err(IdentError::NarrowRange { .. })
+        ));
         let mut bad: Vec<(f64, f64)> = (1..8).map(|k| (0.001 * 3f64.powi(k), 1.0)).collect();
         bad[2].1 = f64::NAN;
         assert_eq!(fit_friction_law(&bad), Err(IdentError::BadPoint(2)));
@@ -175,7 +223,11 @@ mod tests {
     fn thesis_table_gives_0_709() {
         let fit = fit_friction_coefficient(&THESIS_FIG_4_6).unwrap();
         assert_eq!(format!("{:.3}", fit.mu), "0.709");
-        assert!((fit.mu_least_squares - 0.737).abs() < 1e-3, "{}", fit.mu_least_squares);
+        assert!(
+            (fit.mu_least_squares - 0.737).abs() < 1e-3,
+            "{}",
+            fit.mu_least_squares
+        );
     }
 
     #[test]

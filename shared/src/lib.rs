@@ -1,17 +1,17 @@
 //! afs-shared: the pure, deterministic core of afs.
 #![warn(missing_docs)]
 
-pub mod friction;
-pub mod math;
 pub mod arm;
-pub mod surface;
+pub mod dither;
+pub mod experiments;
+pub mod friction;
+pub mod hybrid;
+pub mod ident;
+pub mod math;
 pub mod plant;
 pub mod sensor;
-pub mod dither;
-pub mod tuner;
-pub mod window;
-pub mod hybrid;
 pub mod servo;
 pub mod sim;
-pub mod ident;
-pub mod experiments;
+pub mod surface;
+pub mod tuner;
+pub mod window;

@@ -217,7 +217,10 @@ mod tests {
         let gl = GaussLegendre::<8>::new();
         let got = gl.integrate(0.0, 2.0, |x| x.powi(15));
         let expected = 2f64.powi(16) / 16.0;
-        assert!((got - expected).abs() < 1e-9 * expected, "{got} vs {expected}");
+        assert!(
+            (got - expected).abs() < 1e-9 * expected,
+            "{got} vs {expected}"
+        );
         let w: f64 = gl.weights.iter().sum();
         assert!((w - 2.0).abs() < 1e-14);
     }

@@ -68,7 +68,10 @@ impl PlantParams {
             return Err(format!("plant.reference_normal_force_n = {r} must be > 0"));
         }
         if !(self.tool_mass_kg.is_finite() && self.tool_mass_kg >= 0.0) {
-            return Err(format!("plant.tool_mass_kg = {} must be ≥ 0", self.tool_mass_kg));
+            return Err(format!(
+                "plant.tool_mass_kg = {} must be ≥ 0",
+                self.tool_mass_kg
+            ));
         }
         if self.tool_mass_kg > self.arm.tip_mass_kg {
             return Err(format!(
@@ -77,7 +80,10 @@ impl PlantParams {
             ));
         }
         if !(self.tool_length_m.is_finite() && self.tool_length_m >= 0.0) {
-            return Err(format!("plant.tool_length_m = {} must be ≥ 0", self.tool_length_m));
+            return Err(format!(
+                "plant.tool_length_m = {} must be ≥ 0",
+                self.tool_length_m
+            ));
         }
         for p in &self.roughness.patches {
             if !(p.centre_m.is_finite() && p.half_width_m.is_finite() && p.gain.is_finite()) {
@@ -223,7 +229,12 @@ impl Plant {
         self.q = Vector2::new(s.q[0], s.q[1]);
         self.qd = Vector2::new(s.qd[0], s.qd[1]);
         for k in 0..2 {
-            self.slots[k] = (s.friction[k].0, Presliding { deflection_m: s.friction[k].1 });
+            self.slots[k] = (
+                s.friction[k].0,
+                Presliding {
+                    deflection_m: s.friction[k].1,
+                },
+            );
         }
         self.truth = self.evaluate_static();
     }
@@ -246,7 +257,15 @@ impl Plant {
         let contacts = self.surface.contacts(tip);
         let mut force = Vec2::zeros();
         let mut normal_sum = 0.0;
-        let mut truth = PlantTruth { time_s: self.time_s, q: self.q, qd: self.qd, tip, tip_velocity: vel, torque: tau, ..Default::default() };
+        let mut truth = PlantTruth {
+            time_s: self.time_s,
+            q: self.q,
+            qd: self.qd,
+            tip,
+            tip_velocity: vel,
+            torque: tau,
+            ..Default::default()
+        };
         let mut new_slots = [(EMPTY, Presliding::default()); 2];
         for (i, c) in contacts.as_slice().iter().enumerate() {
             let depth_rate = -vel.dot(&c.normal);
@@ -264,7 +283,8 @@ impl Plant {
                 if dt > 0.0 {
                     state.step(&law, &p.presliding, v_slide, dt)
                 } else {
-                    p.presliding.stiffness_n_per_m * state.deflection_m + law.viscous_n_s_per_m * v_slide
+                    p.presliding.stiffness_n_per_m * state.deflection_m
+                        + law.viscous_n_s_per_m * v_slide
                 }
             } else {
                 state.reset();
@@ -307,7 +327,10 @@ impl Plant {
         let xe = Vec2::new(c, s);
         let f = contact_force - tip_acc * self.params.tool_mass_kg;
         let moment = cross(xe * self.params.tool_length_m, f);
-        Wrench { force: Vec2::new(c * f.x + s * f.y, -s * f.x + c * f.y), torque: moment }
+        Wrench {
+            force: Vec2::new(c * f.x + s * f.y, -s * f.x + c * f.y),
+            torque: moment,
+        }
     }
 
     /// Advances the world by `dt` (s) under joint torques `tau` (N·m).
@@ -339,7 +362,9 @@ mod tests {
         let tip = arm.forward(q0);
         let surface = Surface::plane(tip, 0.0);
         let depth = 2.5 / params.contact.stiffness();
-        let q = arm.inverse(tip - Vec2::new(0.0, depth), Elbow::Negative).unwrap();
+        let q = arm
+            .inverse(tip - Vec2::new(0.0, depth), Elbow::Negative)
+            .unwrap();
         (Plant::new(params, surface, q), q)
     }
 
@@ -359,7 +384,11 @@ mod tests {
         // The sensor frame is link 2's: F = R(−φ)·(0, 2.5).
         let (sn, cs) = plant.arm().link2_angle(t.q).sin_cos();
         let expected = Vec2::new(sn * 2.5, cs * 2.5);
-        assert!((t.sensor_wrench.force - expected).norm() < 1e-6, "{:?}", t.sensor_wrench);
+        assert!(
+            (t.sensor_wrench.force - expected).norm() < 1e-6,
+            "{:?}",
+            t.sensor_wrench
+        );
         assert!((expected.x + 2.5).abs() < 1e-5);
         // Moment about the sensor origin: r × F with r along the tool axis.
         let m = cross(unit(plant.arm().link2_angle(t.q)) * 0.05, t.contact_force);
@@ -383,7 +412,8 @@ mod tests {
             let (qq, qqd) = plant.joints();
             let jinv = arm.jacobian(qq).try_inverse().unwrap();
             let qd_des = jinv * Vec2::new(0.02, 0.0);
-            let tau = (qd_target - qq) * 4000.0 + (qd_des - qqd) * 60.0
+            let tau = (qd_target - qq) * 4000.0
+                + (qd_des - qqd) * 60.0
                 + holding_torque(&arm, qq, Vec2::new(0.0, 2.5));
             plant.step(tau, 1e-4);
             let tr = plant.truth();
@@ -393,13 +423,18 @@ mod tests {
         }
         let law = plant.params().friction.scaled(fnn / 2.5);
         assert!((v - 0.02).abs() < 1e-4, "v = {v}");
-        assert!((fr + law.resistance(v)).abs() < 2e-3, "friction {fr} vs law {}", -law.resistance(v));
+        assert!(
+            (fr + law.resistance(v)).abs() < 2e-3,
+            "friction {fr} vs law {}",
+            -law.resistance(v)
+        );
     }
 
     #[test]
     fn state_round_trip() {
         let (mut plant, q) = world();
-        let tau = holding_torque(plant.arm(), q, plant.truth().contact_force) + Vector2::new(0.0, 0.3);
+        let tau =
+            holding_torque(plant.arm(), q, plant.truth().contact_force) + Vector2::new(0.0, 0.3);
         for _ in 0..200 {
             plant.step(tau, 1e-4);
         }

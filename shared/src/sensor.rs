@@ -99,7 +99,10 @@ impl SensorParams {
     /// Checks the parameters; the message names the field and what to do.
     pub fn validate(&self) -> Result<(), String> {
         if !(self.rate_hz.is_finite() && self.rate_hz >= 10.0 && self.rate_hz <= 100_000.0) {
-            return Err(format!("sensor.rate_hz = {} must lie in [10, 100000]", self.rate_hz));
+            return Err(format!(
+                "sensor.rate_hz = {} must lie in [10, 100000]",
+                self.rate_hz
+            ));
         }
         let nonneg = [
             ("noise_force_n", self.noise_force_n),
@@ -186,7 +189,17 @@ impl SensorModel {
             params.noise_force_n / gain,
             params.noise_torque_nm / gain,
         ];
-        Self { params, rng, bias, drift: [0.0; 3], drift_rate: [0.0; 2], filtered: [0.0; 3], primed: false, alpha, raw_noise }
+        Self {
+            params,
+            rng,
+            bias,
+            drift: [0.0; 3],
+            drift_rate: [0.0; 2],
+            filtered: [0.0; 3],
+            primed: false,
+            alpha,
+            raw_noise,
+        }
     }
 
     /// The parameters.
@@ -225,8 +238,8 @@ impl SensorModel {
         }
         if !self.primed {
             // Start the filter at the first value without its noise (no start-up transient).
-            for k in 0..3 {
-                self.filtered[k] = truth3[k] + self.bias[k];
+            for ((f, t), b) in self.filtered.iter_mut().zip(truth3).zip(self.bias) {
+                *f = t + b;
             }
             self.primed = true;
         }
@@ -249,7 +262,13 @@ impl SensorModel {
             }
             out[k] = y;
         }
-        Reading { wrench: Wrench { force: Vec2::new(out[0], out[1]), torque: out[2] }, saturated }
+        Reading {
+            wrench: Wrench {
+                force: Vec2::new(out[0], out[1]),
+                torque: out[2],
+            },
+            saturated,
+        }
     }
 }
 
@@ -271,7 +290,10 @@ mod tests {
         let mut sum = 0.0;
         let mut sum2 = 0.0;
         for _ in 0..n {
-            let r = s.sample(Wrench { force: Vec2::new(1.0, 0.0), torque: 0.0 });
+            let r = s.sample(Wrench {
+                force: Vec2::new(1.0, 0.0),
+                torque: 0.0,
+            });
             sum += r.wrench.force.x;
             sum2 += r.wrench.force.x.powi(2);
         }
@@ -284,13 +306,23 @@ mod tests {
     /// The filter's step response reaches 1 − 1/e after one time constant.
     #[test]
     fn lowpass_time_constant() {
-        let p = SensorParams { cutoff_hz: 50.0, ..SensorParams::ideal(7000.0) };
+        let p = SensorParams {
+            cutoff_hz: 50.0,
+            ..SensorParams::ideal(7000.0)
+        };
         let mut s = SensorModel::new(p, 0);
         s.sample(Wrench::default());
         let tau_samples = (7000.0 / (std::f64::consts::TAU * 50.0)).round() as usize;
         let mut y = 0.0;
         for _ in 0..tau_samples {
-            y = s.sample(Wrench { force: Vec2::new(1.0, 0.0), torque: 0.0 }).wrench.force.x;
+            y = s
+                .sample(Wrench {
+                    force: Vec2::new(1.0, 0.0),
+                    torque: 0.0,
+                })
+                .wrench
+                .force
+                .x;
         }
         assert!((y - (1.0 - (-1.0f64).exp())).abs() < 0.01, "{y}");
     }
@@ -300,12 +332,18 @@ mod tests {
         let mut a = SensorModel::new(SensorParams::default(), 9);
         let mut b = SensorModel::new(SensorParams::default(), 9);
         for _ in 0..100 {
-            let w = Wrench { force: Vec2::new(0.3, -2.0), torque: 0.01 };
+            let w = Wrench {
+                force: Vec2::new(0.3, -2.0),
+                torque: 0.01,
+            };
             assert_eq!(a.sample(w), b.sample(w));
         }
         let mut r = Reading::default();
         for _ in 0..50 {
-            r = a.sample(Wrench { force: Vec2::new(500.0, 0.0), torque: 0.0 });
+            r = a.sample(Wrench {
+                force: Vec2::new(500.0, 0.0),
+                torque: 0.0,
+            });
         }
         assert!(r.saturated);
         assert!(r.wrench.force.x <= 130.0);
@@ -315,7 +353,14 @@ mod tests {
     /// time the offset moves about rate × time.
     #[test]
     fn drift_rate_has_configured_spread() {
-        let p = SensorParams { noise_force_n: 0.0, bias_force_n: 0.0, quantization_force_n: 0.0, cutoff_hz: 0.0, drift_correlation_s: 1.0, ..SensorParams::default() };
+        let p = SensorParams {
+            noise_force_n: 0.0,
+            bias_force_n: 0.0,
+            quantization_force_n: 0.0,
+            cutoff_hz: 0.0,
+            drift_correlation_s: 1.0,
+            ..SensorParams::default()
+        };
         let mut s = SensorModel::new(p, 5);
         let n = 7000 * 400;
         let mut sum2 = 0.0;
@@ -329,9 +374,15 @@ mod tests {
 
     #[test]
     fn invalid_parameters_are_rejected() {
-        let p = SensorParams { cutoff_hz: 4000.0, ..SensorParams::default() };
+        let p = SensorParams {
+            cutoff_hz: 4000.0,
+            ..SensorParams::default()
+        };
         assert!(p.validate().unwrap_err().contains("cutoff_hz"));
-        let p = SensorParams { noise_force_n: -1.0, ..SensorParams::default() };
+        let p = SensorParams {
+            noise_force_n: -1.0,
+            ..SensorParams::default()
+        };
         assert!(p.validate().is_err());
         assert!(SensorParams::default().validate().is_ok());
     }

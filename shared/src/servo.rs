@@ -68,7 +68,10 @@ impl ServoParams {
     /// Checks every setting; the message names the field.
     pub fn validate(&self) -> Result<(), String> {
         if !(self.rate_hz.is_finite() && (100.0..=100_000.0).contains(&self.rate_hz)) {
-            return Err(format!("servo.rate_hz = {} must lie in [100, 100000]", self.rate_hz));
+            return Err(format!(
+                "servo.rate_hz = {} must lie in [100, 100000]",
+                self.rate_hz
+            ));
         }
         for (j, b) in self.joint_bandwidth_hz.iter().enumerate() {
             if !(b.is_finite() && *b > 0.0 && *b < self.rate_hz / 20.0) {
@@ -79,15 +82,26 @@ impl ServoParams {
             }
         }
         if !(self.joint_damping_ratio.is_finite() && self.joint_damping_ratio > 0.0) {
-            return Err(format!("servo.joint_damping_ratio = {} must be > 0", self.joint_damping_ratio));
+            return Err(format!(
+                "servo.joint_damping_ratio = {} must be > 0",
+                self.joint_damping_ratio
+            ));
         }
-        if !(self.joint_integral_ratio.is_finite() && self.joint_integral_ratio >= 0.0 && self.joint_integral_ratio < 1.0) {
-            return Err(format!("servo.joint_integral_ratio = {} must lie in [0, 1)", self.joint_integral_ratio));
+        if !(self.joint_integral_ratio.is_finite()
+            && self.joint_integral_ratio >= 0.0
+            && self.joint_integral_ratio < 1.0)
+        {
+            return Err(format!(
+                "servo.joint_integral_ratio = {} must lie in [0, 1)",
+                self.joint_integral_ratio
+            ));
         }
         self.hybrid.validate()?;
         self.dither.validate()?;
         self.tuner.validate()?;
-        self.friction_model.validate().map_err(|e| format!("servo.friction_model: {e}"))?;
+        self.friction_model
+            .validate()
+            .map_err(|e| format!("servo.friction_model: {e}"))?;
         if !(self.friction_model_reference_n.is_finite() && self.friction_model_reference_n > 0.0) {
             return Err(format!(
                 "servo.friction_model_reference_n = {} must be > 0",
@@ -95,7 +109,10 @@ impl ServoParams {
             ));
         }
         if !(self.tool_mass_kg.is_finite() && self.tool_mass_kg >= 0.0) {
-            return Err(format!("servo.tool_mass_kg = {} must be ≥ 0", self.tool_mass_kg));
+            return Err(format!(
+                "servo.tool_mass_kg = {} must be ≥ 0",
+                self.tool_mass_kg
+            ));
         }
         Ok(())
     }
@@ -190,7 +207,12 @@ impl ServoCore {
         let arm = Arm::new(arm_params);
         let m = arm.mass_matrix(q0);
         let gains: [PidGains; 2] = [0, 1].map(|j| {
-            tune_pid_for_bandwidth(m[(j, j)], params.joint_bandwidth_hz[j], params.joint_damping_ratio, params.joint_integral_ratio)
+            tune_pid_for_bandwidth(
+                m[(j, j)],
+                params.joint_bandwidth_hz[j],
+                params.joint_damping_ratio,
+                params.joint_integral_ratio,
+            )
         });
         let mut pid = JointServo::new(gains, arm_params.torque_limit_nm);
         let f0 = Self::to_world(&arm, q0, wrench0);
@@ -198,7 +220,10 @@ impl ServoCore {
         let frame = TaskFrame::new(arm.forward(q0), tangent_angle);
         let k_servo = servo_stiffness_along(&arm, q0, [gains[0].kp, gains[1].kp], frame.normal());
         let hybrid = HybridController::new(params.hybrid, frame, k_servo);
-        let amplitude_bound = params.dither.amplitude_bound(params.hybrid.preload_n, params.hybrid.stiffness_estimate_n_per_m);
+        let amplitude_bound = params.dither.amplitude_bound(
+            params.hybrid.preload_n,
+            params.hybrid.stiffness_estimate_n_per_m,
+        );
         let omega = params.dither.omega();
         let ctx = TunerContext {
             law: params.friction_model,
@@ -319,10 +344,19 @@ impl ServoCore {
             && inp.wrench.force.y.is_finite()
             && inp.wrench.torque.is_finite();
         let pose = self.arm.pose(inp.q);
-        let wrench = Wrench { force: inp.wrench.force - self.tare.force, torque: inp.wrench.torque - self.tare.torque };
-        let force = if valid { Self::to_world_at(&pose, wrench) } else { Vec2::zeros() };
+        let wrench = Wrench {
+            force: inp.wrench.force - self.tare.force,
+            torque: inp.wrench.torque - self.tare.torque,
+        };
+        let force = if valid {
+            Self::to_world_at(&pose, wrench)
+        } else {
+            Vec2::zeros()
+        };
         let dither = self.dither.step(dt);
-        let cmd: HybridCommand = self.hybrid.step(dt, force, dither, valid && self.force_control);
+        let cmd: HybridCommand = self
+            .hybrid
+            .step(dt, force, dither, valid && self.force_control);
         let mut held = false;
         let (q_d, pose_d) = match self.arm.inverse_pose(cmd.position, self.elbow) {
             Ok(x) => x,
@@ -331,11 +365,16 @@ impl ServoCore {
                 (self.last_q_d, self.arm.pose(self.last_q_d))
             }
         };
-        let jinv = if held { None } else { self.arm.jacobian_at(&pose_d).try_inverse() };
+        let jinv = if held {
+            None
+        } else {
+            self.arm.jacobian_at(&pose_d).try_inverse()
+        };
         let (qd_d, qdd_d) = match jinv {
             Some(ji) => {
                 let qd_d = ji * cmd.velocity;
-                let qdd_d = ji * (cmd.acceleration - self.arm.jacobian_dot_at(&pose_d, qd_d) * qd_d);
+                let qdd_d =
+                    ji * (cmd.acceleration - self.arm.jacobian_dot_at(&pose_d, qd_d) * qd_d);
                 (qd_d, qdd_d)
             }
             None => (Vector2::zeros(), Vector2::zeros()),
@@ -350,11 +389,19 @@ impl ServoCore {
 
         // Tuner: friction resisting the nominal motion, normalised to the model's reference force.
         let t_hat = self.hybrid.frame().tangent();
-        let dir = if self.hybrid.velocity_target() < 0.0 { -1.0 } else { 1.0 };
+        let dir = if self.hybrid.velocity_target() < 0.0 {
+            -1.0
+        } else {
+            1.0
+        };
         let v_tan = (self.arm.jacobian_at(&pose) * inp.qd).dot(&t_hat);
         let f_ref = self.params.friction_model_reference_n;
         let normal = cmd.normal_force_n;
-        let ratio = if normal > 0.2 * f_ref { f_ref / normal } else { 1.0 };
+        let ratio = if normal > 0.2 * f_ref {
+            f_ref / normal
+        } else {
+            1.0
+        };
         let friction = -cmd.tangential_force_n * dir * ratio;
         let nominal = self.hybrid.nominal_velocity().abs();
         if self.tuning && valid && nominal > 0.0 {

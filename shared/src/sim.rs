@@ -37,7 +37,9 @@ impl Default for SimConfig {
     fn default() -> Self {
         let plant = PlantParams::default();
         let arm = Arm::new(plant.arm);
-        let q = arm.decoupled_configuration(0.0, Elbow::Negative).unwrap_or_default();
+        let q = arm
+            .decoupled_configuration(0.0, Elbow::Negative)
+            .unwrap_or_default();
         let tip = arm.forward(q);
         Self {
             plant,
@@ -78,7 +80,8 @@ impl SimConfig {
         let normal = crate::math::perp(crate::math::unit(angle));
         let depth = self.servo.hybrid.preload_n / self.plant.contact.stiffness();
         let tip: Vec2 = on_surface - normal * depth;
-        arm.inverse(tip, self.plant.elbow).map_err(|e| format!("start point: {e}"))
+        arm.inverse(tip, self.plant.elbow)
+            .map_err(|e| format!("start point: {e}"))
     }
 }
 
@@ -91,7 +94,10 @@ pub fn tare(sensor: &mut SensorModel) -> Wrench {
         acc.force += r.wrench.force;
         acc.torque += r.wrench.torque;
     }
-    Wrench { force: acc.force / n as f64, torque: acc.torque / n as f64 }
+    Wrench {
+        force: acc.force / n as f64,
+        torque: acc.torque / n as f64,
+    }
 }
 
 /// The three boards in lockstep.
@@ -126,7 +132,14 @@ impl Lockstep {
         let mut wrench0 = reading.wrench;
         wrench0.force -= tare.force;
         wrench0.torque -= tare.torque;
-        let mut servo = ServoCore::new(cfg.servo, cfg.plant.arm, cfg.plant.elbow, q, wrench0, tangent)?;
+        let mut servo = ServoCore::new(
+            cfg.servo,
+            cfg.plant.arm,
+            cfg.plant.elbow,
+            q,
+            wrench0,
+            tangent,
+        )?;
         servo.set_tare(tare);
         Ok(Self {
             plant,
@@ -150,7 +163,12 @@ impl Lockstep {
             self.sensor_ticks += 1;
         }
         let (q, qd) = self.plant.joints();
-        let input = ServoInput { q, qd, wrench: self.reading.wrench, force_valid: true };
+        let input = ServoInput {
+            q,
+            qd,
+            wrench: self.reading.wrench,
+            force_valid: true,
+        };
         let tau = self.servo.step(&input, self.dt);
         self.plant.step(tau, self.dt);
         self.ticks += 1;

@@ -131,7 +131,10 @@ impl Surface {
     /// right of the tangent.
     pub fn plane(point: Vec2, angle: f64) -> Self {
         Self {
-            frame: SurfaceFrame { origin_m: [point.x, point.y], angle_rad: angle },
+            frame: SurfaceFrame {
+                origin_m: [point.x, point.y],
+                angle_rad: angle,
+            },
             shape: Shape::Plane,
         }
     }
@@ -147,7 +150,10 @@ impl Surface {
         }
         match &self.shape {
             Shape::Plane => Ok(()),
-            Shape::Sinusoid { amplitude_m, wavelength_m } => {
+            Shape::Sinusoid {
+                amplitude_m,
+                wavelength_m,
+            } => {
                 if !amplitude_m.is_finite() {
                     return Err(SurfaceError::NotFinite("amplitude_m"));
                 }
@@ -201,7 +207,10 @@ impl Surface {
     pub fn height_slope(&self, u: f64) -> (f64, f64) {
         match &self.shape {
             Shape::Plane => (0.0, 0.0),
-            Shape::Sinusoid { amplitude_m, wavelength_m } => {
+            Shape::Sinusoid {
+                amplitude_m,
+                wavelength_m,
+            } => {
                 let k = std::f64::consts::TAU / wavelength_m;
                 (amplitude_m * (k * u).sin(), amplitude_m * k * (k * u).cos())
             }
@@ -236,10 +245,19 @@ impl Surface {
         match &self.shape {
             Shape::Plane => {
                 if w < 0.0 {
-                    out.push(ContactPoint { depth_m: -w, normal: n0, tangent: t0, u_m: u, feature: 0 });
+                    out.push(ContactPoint {
+                        depth_m: -w,
+                        normal: n0,
+                        tangent: t0,
+                        u_m: u,
+                        feature: 0,
+                    });
                 }
             }
-            Shape::Sinusoid { amplitude_m, wavelength_m } => {
+            Shape::Sinusoid {
+                amplitude_m,
+                wavelength_m,
+            } => {
                 let k = std::f64::consts::TAU / wavelength_m;
                 let h = |x: f64| amplitude_m * (k * x).sin();
                 if w >= h(u) {
@@ -267,7 +285,13 @@ impl Surface {
                 let depth = ((s - u).powi(2) + (hs - w).powi(2)).sqrt();
                 let norm = (1.0 + slope * slope).sqrt();
                 let tangent = local_to_world((1.0 / norm, slope / norm));
-                out.push(ContactPoint { depth_m: depth, normal: perp(tangent), tangent, u_m: s, feature: 0 });
+                out.push(ContactPoint {
+                    depth_m: depth,
+                    normal: perp(tangent),
+                    tangent,
+                    u_m: s,
+                    feature: 0,
+                });
             }
             Shape::Polyline { vertices } => {
                 let (hu, _) = self.height_slope(u);
@@ -293,7 +317,11 @@ impl Surface {
                     }
                     let along = rel.0 * dir.0 + rel.1 * dir.1;
                     let lo = if i == 0 { f64::NEG_INFINITY } else { -depth };
-                    let hi = if i + 2 == n { f64::INFINITY } else { len + depth };
+                    let hi = if i + 2 == n {
+                        f64::INFINITY
+                    } else {
+                        len + depth
+                    };
                     if along < lo || along > hi {
                         continue;
                     }
@@ -341,7 +369,7 @@ fn segment_index(vertices: &[[f64; 2]], u: f64) -> usize {
 
 /// Normal contact law: penetration → push.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct ContactLaw {
     /// Interaction stiffness k_e of the part contact (N/m); thesis default 10e3.
     pub interaction_stiffness_n_per_m: f64,
@@ -364,7 +392,10 @@ impl Default for ContactLaw {
 impl ContactLaw {
     /// Series stiffness of contact and sensor (N/m).
     pub fn stiffness(&self) -> f64 {
-        series_stiffness(self.interaction_stiffness_n_per_m, self.sensor_stiffness_n_per_m)
+        series_stiffness(
+            self.interaction_stiffness_n_per_m,
+            self.sensor_stiffness_n_per_m,
+        )
     }
 
     /// Normal push (N, ≥ 0) for penetration `depth` (m) and penetration rate `depth_rate` (m/s).
@@ -378,7 +409,10 @@ impl ContactLaw {
     /// Checks the parameters.
     pub fn validate(&self) -> Result<(), String> {
         for (name, v) in [
-            ("interaction_stiffness_n_per_m", self.interaction_stiffness_n_per_m),
+            (
+                "interaction_stiffness_n_per_m",
+                self.interaction_stiffness_n_per_m,
+            ),
             ("sensor_stiffness_n_per_m", self.sensor_stiffness_n_per_m),
         ] {
             if !(v.is_finite() && v > 0.0) {
@@ -417,8 +451,14 @@ mod tests {
     #[test]
     fn sinusoid_depth_is_distance_to_curve() {
         let s = Surface {
-            frame: SurfaceFrame { origin_m: [0.0, 0.0], angle_rad: 0.2 },
-            shape: Shape::Sinusoid { amplitude_m: 0.01, wavelength_m: 0.1 },
+            frame: SurfaceFrame {
+                origin_m: [0.0, 0.0],
+                angle_rad: 0.2,
+            },
+            shape: Shape::Sinusoid {
+                amplitude_m: 0.01,
+                wavelength_m: 0.1,
+            },
         };
         for &u in &[0.0, 0.013, 0.025, 0.06, 0.081] {
             let (h, _) = s.height_slope(u);
@@ -430,7 +470,11 @@ mod tests {
                 let x = u - 0.01 + 0.02 * k as f64 / 200_000.0;
                 best = best.min((s.point_at(x) - p).norm());
             }
-            assert!((c.points[0].depth_m - best).abs() < 1e-9, "u={u}: {} vs {best}", c.points[0].depth_m);
+            assert!(
+                (c.points[0].depth_m - best).abs() < 1e-9,
+                "u={u}: {} vs {best}",
+                c.points[0].depth_m
+            );
             // The normal points from the tool towards the nearest surface point.
             let foot = s.point_at(c.points[0].u_m);
             assert!(((foot - p).normalize() - c.points[0].normal).norm() < 1e-6);
@@ -439,8 +483,13 @@ mod tests {
 
     fn valley() -> Surface {
         Surface {
-            frame: SurfaceFrame { origin_m: [0.0, 0.0], angle_rad: 0.0 },
-            shape: Shape::Polyline { vertices: vec![[-0.1, 0.0], [0.0, 0.0], [0.05, 0.05]] },
+            frame: SurfaceFrame {
+                origin_m: [0.0, 0.0],
+                angle_rad: 0.0,
+            },
+            shape: Shape::Polyline {
+                vertices: vec![[-0.1, 0.0], [0.0, 0.0], [0.05, 0.05]],
+            },
         }
     }
 
@@ -457,14 +506,23 @@ mod tests {
         assert_eq!(c.count, 2, "{c:?}");
         let depths: Vec<f64> = c.as_slice().iter().map(|p| p.depth_m).collect();
         assert!(depths.iter().any(|d| (d - 0.0002).abs() < 1e-12));
-        assert!(depths.iter().any(|d| (d - 0.0003 / 2f64.sqrt()).abs() < 1e-12));
+        assert!(
+            depths
+                .iter()
+                .any(|d| (d - 0.0003 / 2f64.sqrt()).abs() < 1e-12)
+        );
     }
 
     #[test]
     fn peak_corner_presses_on_nearest_face_only() {
         let s = Surface {
-            frame: SurfaceFrame { origin_m: [0.0, 0.0], angle_rad: 0.0 },
-            shape: Shape::Polyline { vertices: vec![[-0.1, -0.1], [0.0, 0.0], [0.1, -0.1]] },
+            frame: SurfaceFrame {
+                origin_m: [0.0, 0.0],
+                angle_rad: 0.0,
+            },
+            shape: Shape::Polyline {
+                vertices: vec![[-0.1, -0.1], [0.0, 0.0], [0.1, -0.1]],
+            },
         };
         let c = s.contacts(Vec2::new(0.0002, -0.0005));
         assert_eq!(c.count, 1);
@@ -475,12 +533,20 @@ mod tests {
     #[test]
     fn bad_surfaces_are_rejected() {
         let s = Surface {
-            frame: SurfaceFrame { origin_m: [0.0, 0.0], angle_rad: 0.0 },
-            shape: Shape::Polyline { vertices: vec![[0.0, 0.0], [0.0, 1.0]] },
+            frame: SurfaceFrame {
+                origin_m: [0.0, 0.0],
+                angle_rad: 0.0,
+            },
+            shape: Shape::Polyline {
+                vertices: vec![[0.0, 0.0], [0.0, 1.0]],
+            },
         };
         assert_eq!(s.validate(), Err(SurfaceError::BadPolyline(1)));
         let s = Surface {
-            frame: SurfaceFrame { origin_m: [f64::NAN, 0.0], angle_rad: 0.0 },
+            frame: SurfaceFrame {
+                origin_m: [f64::NAN, 0.0],
+                angle_rad: 0.0,
+            },
             shape: Shape::Plane,
         };
         assert!(s.validate().is_err());

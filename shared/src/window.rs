@@ -23,7 +23,14 @@ pub struct SlidingWindow {
 impl SlidingWindow {
     /// A window of `capacity ≥ 1` samples.
     pub fn new(capacity: usize) -> Self {
-        Self { buf: vec![0.0; capacity.max(1)], head: 0, len: 0, sum: 0.0, sum2: 0.0, since_recompute: 0 }
+        Self {
+            buf: vec![0.0; capacity.max(1)],
+            head: 0,
+            len: 0,
+            sum: 0.0,
+            sum2: 0.0,
+            since_recompute: 0,
+        }
     }
 
     /// Adds a sample, dropping the oldest when full.
@@ -78,7 +85,11 @@ impl SlidingWindow {
 
     /// Mean (0 when empty).
     pub fn mean(&self) -> f64 {
-        if self.len == 0 { 0.0 } else { self.sum / self.len as f64 }
+        if self.len == 0 {
+            0.0
+        } else {
+            self.sum / self.len as f64
+        }
     }
 
     /// Population variance (0 when empty).
@@ -219,7 +230,9 @@ mod tests {
     #[test]
     fn sliding_window_matches_direct_statistics() {
         let mut w = SlidingWindow::new(50);
-        let xs: Vec<f64> = (0..237).map(|k| ((k * 37) % 101) as f64 * 0.1 - 3.0).collect();
+        let xs: Vec<f64> = (0..237)
+            .map(|k| ((k * 37) % 101) as f64 * 0.1 - 3.0)
+            .collect();
         for &x in &xs {
             w.push(x);
         }

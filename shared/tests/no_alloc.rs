@@ -1,0 +1,73 @@
+//! One plant + sensor + controller step allocates nothing, with either tuner running (the
+//! cost tuner's once-per-period model minimisation included).
+
+use afs_shared::sim::{Lockstep, SimConfig};
+use afs_shared::tuner::{CostTunerParams, ThesisTunerParams, TunerConfig};
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+struct Counting;
+
+thread_local! {
+    // Per thread, so tests running in parallel do not count each other's allocations.
+    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
+}
+
+fn count() {
+    // `try_with`: the allocator may run while this thread's locals are being torn down.
+    let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
+}
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        count();
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        count();
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+fn allocations_during_steps(tuner: TunerConfig) -> usize {
+    let cfg = SimConfig {
+        servo: afs_shared::servo::ServoParams {
+            tuner,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let mut sim = Lockstep::new(&cfg).expect("default set-up is valid");
+    sim.servo_mut().hybrid_mut().set_velocity(0.01);
+    sim.servo_mut().set_a_omega(0.002);
+    sim.servo_mut().set_tuning(true);
+    sim.run(100);
+    let before = ALLOCATIONS.with(Cell::get);
+    // 1.5 s: 15 dither periods, so the cost tuner's per-period update runs several times.
+    for _ in 0..15_000 {
+        sim.step();
+    }
+    ALLOCATIONS.with(Cell::get) - before
+}
+
+#[test]
+fn a_step_allocates_nothing_with_the_thesis_tuner() {
+    assert_eq!(
+        allocations_during_steps(TunerConfig::Thesis(ThesisTunerParams::default())),
+        0
+    );
+}
+
+#[test]
+fn a_step_allocates_nothing_with_the_cost_tuner() {
+    assert_eq!(
+        allocations_during_steps(TunerConfig::Cost(CostTunerParams::default())),
+        0
+    );
+}

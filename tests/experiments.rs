@@ -1,0 +1,128 @@
+//! The thesis experiments meet their acceptance criteria, and the `afs experiment` command
+//! writes its plot and JSON. Run in release: `cargo test --release`.
+
+use afs_shared::experiments::{self, Options};
+use std::process::Command;
+
+fn assert_passed<S>(name: &str, out: &experiments::Outcome<S>) {
+    for c in &out.checks {
+        assert!(
+            c.pass,
+            "{name}: check '{}' failed: {} {} {}",
+            c.name, c.value, c.relation, c.limit
+        );
+    }
+}
+
+/// friction-id recovers F_t, F_v, F_s within 5 % and ẋ_s within 10 % at the default noise.
+#[test]
+fn friction_identification_recovers_the_thesis_coefficients() {
+    let out = experiments::friction_id(&Options::default()).unwrap();
+    assert_passed("friction-id", &out);
+}
+
+/// With Aω = 5ẋ_o the mean friction is ≤ 20 % of the undithered one and within 15 % of the
+/// law's cycle average at the velocity the contact saw.
+#[test]
+fn dither_suppresses_friction_as_the_cycle_average_predicts() {
+    let out = experiments::fig4_5(&Options::default()).unwrap();
+    assert_passed("fig4.5", &out);
+    let s = &out.summary;
+    assert!(
+        s.transmission > 0.5 && s.transmission <= 1.05,
+        "transmission {}",
+        s.transmission
+    );
+}
+
+/// μ from simulated trials is within 3 % of the truth; the thesis table gives 0.709.
+#[test]
+fn friction_coefficient_from_trials() {
+    let out = experiments::fig4_6(&Options::default()).unwrap();
+    assert_passed("fig4.6", &out);
+    let table = experiments::fig4_6(&Options {
+        thesis_table: true,
+        ..Default::default()
+    })
+    .unwrap();
+    assert_eq!(table.summary.coefficient, "0.709");
+}
+
+/// The oscillation of the force under dither matches the model at every amplitude.
+#[test]
+fn oscillation_per_amplitude_matches_the_model() {
+    let out = experiments::fig4_7(&Options::default()).unwrap();
+    assert_passed("fig4.7", &out);
+}
+
+/// Both tuners bring the mean friction below 25 % within 5 s, hold the normal force within
+/// ±10 % after 0.5 s and never lose contact; the JSON explains where each settles.
+#[test]
+fn both_tuners_suppress_friction_within_five_seconds() {
+    let out = experiments::fig4_8(&Options::default()).unwrap();
+    assert_passed("fig4.8", &out);
+    let runs = &out.summary.runs;
+    assert_eq!(runs.len(), 2);
+    let cost = runs.iter().find(|r| r.tuner == "cost").unwrap();
+    // The cost tuner settles: Aω no longer moves and the cost gradient vanishes at a*.
+    assert!(
+        cost.final_rate_m_per_s2.abs() < 1e-3,
+        "cost tuner still moving {}",
+        cost.final_rate_m_per_s2
+    );
+    assert!(cost.why.contains("interior minimum"), "{}", cost.why);
+    let thesis = runs.iter().find(|r| r.tuner == "thesis").unwrap();
+    assert!(thesis.why.contains("eq. 4.22"), "{}", thesis.why);
+}
+
+/// A different seed changes the noise but not the conclusions.
+#[test]
+fn tuning_conclusions_hold_for_another_seed() {
+    let out = experiments::fig4_8(&Options {
+        seed: 7,
+        ..Default::default()
+    })
+    .unwrap();
+    assert_passed("fig4.8 seed 7", &out);
+}
+
+fn afs() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_afs"))
+}
+
+#[test]
+fn experiment_command_prints_json_and_writes_the_plot() {
+    let dir = std::env::temp_dir().join(format!("afs-exp-{}", std::process::id()));
+    let out = afs()
+        .args(["experiment", "fig4.6", "--thesis-table", "--json", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value =
+        serde_json::from_slice(&out.stdout).expect("stdout is one JSON object");
+    assert_eq!(v["summary"]["coefficient"], "0.709");
+    assert_eq!(v["passed"], true);
+    let plot = dir.join("fig4_6.svg");
+    let svg = std::fs::read_to_string(&plot).unwrap();
+    assert!(svg.contains("normal force F_N (N)") && svg.contains("tangential force F_t (N)"));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn unknown_experiment_is_a_clear_error() {
+    let out = afs()
+        .args(["experiment", "fig9.9", "--out", "/tmp"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("unknown experiment 'fig9.9'") && err.contains("fig4.8"),
+        "{err}"
+    );
+}
