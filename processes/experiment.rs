@@ -35,6 +35,7 @@ pub fn run(name: &str, opts: &Options, out_dir: &Path) -> Result<(Value, bool)> 
         "fig4.6" => pack(experiments::fig4_6(opts))?,
         "fig4.7" => pack(experiments::fig4_7(opts))?,
         "fig4.8" => pack(experiments::fig4_8(opts))?,
+        "tangent" => pack(experiments::tangent(opts))?,
         other => bail!(
             "unknown experiment '{other}'; choose one of: {}",
             experiments::NAMES.join(", ")

@@ -490,6 +490,7 @@ pub struct JointServo {
     pub torque_limit: [f64; 2],
     /// Integral of the position error (rad·s), scaled by ki inside.
     integral: Vector2<f64>,
+    integrating: bool,
 }
 
 impl JointServo {
@@ -499,6 +500,7 @@ impl JointServo {
             gains,
             torque_limit,
             integral: Vector2::zeros(),
+            integrating: true,
         }
     }
 
@@ -509,6 +511,11 @@ impl JointServo {
             let ki = self.gains[j].ki;
             self.integral[j] = if ki > 0.0 { torque[j] / ki } else { 0.0 };
         }
+    }
+
+    /// Freezes (false) or resumes (true) the integrators; frozen, they hold their torque.
+    pub fn set_integrating(&mut self, on: bool) {
+        self.integrating = on;
     }
 
     /// The integrator's share of the torque (N·m).
@@ -538,7 +545,7 @@ impl JointServo {
             let unsat = g.kp * e + g.kd * ed + g.ki * (self.integral[j] + e * dt) + feedforward[j];
             let lim = self.torque_limit[j];
             // Conditional integration: do not wind up further into saturation.
-            if unsat.abs() <= lim || unsat.signum() != e.signum() {
+            if self.integrating && (unsat.abs() <= lim || unsat.signum() != e.signum()) {
                 self.integral[j] += e * dt;
             }
             let out = g.kp * e + g.kd * ed + g.ki * self.integral[j] + feedforward[j];

@@ -110,6 +110,17 @@ impl TaskFrame {
     }
 }
 
+/// An extra set-point motion (world frame), e.g. a tangent-probe stroke.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SetpointOffset {
+    /// Displacement (m).
+    pub displacement: Vec2,
+    /// Velocity (m/s).
+    pub velocity: Vec2,
+    /// Acceleration (m/s²).
+    pub acceleration: Vec2,
+}
+
 /// The hybrid controller's output for one tick.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
 pub struct HybridCommand {
@@ -227,6 +238,16 @@ impl HybridController {
         self.depth = 0.0;
     }
 
+    /// Tangential travel since the frame was last re-based (m).
+    pub fn travel(&self) -> f64 {
+        self.s
+    }
+
+    /// Normal set-point into the surface since the frame was last re-based (m).
+    pub fn depth(&self) -> f64 {
+        self.depth
+    }
+
     /// Moves the normal set-point by `delta` (m, + into the surface), e.g. to back off.
     pub fn shift_depth(&mut self, delta: f64) {
         if delta.is_finite() {
@@ -235,13 +256,15 @@ impl HybridController {
     }
 
     /// One tick: `force` is the measured force on the tool (N, world), `dither` the dither
-    /// displacement, velocity and acceleration along the tangent; `force_control` false
-    /// freezes the force loop (used while the force data is not trusted).
+    /// displacement, velocity and acceleration along the tangent, `extra` any further set-point
+    /// motion (probe strokes); `force_control` false freezes the force loop (while the force
+    /// data is not trusted, or during probe strokes).
     pub fn step(
         &mut self,
         dt: f64,
         force: Vec2,
         dither: (f64, f64, f64),
+        extra: SetpointOffset,
         force_control: bool,
     ) -> HybridCommand {
         let t = self.frame.tangent();
@@ -265,9 +288,10 @@ impl HybridController {
             0.0
         };
         self.depth += self.depth_rate * dt;
-        let position = self.frame.origin + t * (self.s + dither.0) - n * self.depth;
-        let velocity = t * (self.s_dot + dither.1) - n * self.depth_rate;
-        let acceleration = t * (s_ddot + dither.2);
+        let position =
+            self.frame.origin + t * (self.s + dither.0) - n * self.depth + extra.displacement;
+        let velocity = t * (self.s_dot + dither.1) - n * self.depth_rate + extra.velocity;
+        let acceleration = t * (s_ddot + dither.2) + extra.acceleration;
         HybridCommand {
             position,
             velocity,
@@ -301,7 +325,13 @@ mod tests {
         for _ in 0..steps {
             // Environment: surface at y = 0, material below; push = k · depth.
             let depth = (-cmd.position.y).max(0.0);
-            cmd = c.step(dt, Vec2::new(0.0, k * depth), (0.0, 0.0, 0.0), true);
+            cmd = c.step(
+                dt,
+                Vec2::new(0.0, k * depth),
+                (0.0, 0.0, 0.0),
+                SetpointOffset::default(),
+                true,
+            );
         }
         let f = k * (-cmd.position.y);
         let err = (2.5 - f) / 2.5;
@@ -316,12 +346,24 @@ mod tests {
         let mut last = Vec2::zeros();
         for _ in 0..5000 {
             last = c
-                .step(1e-4, Vec2::new(0.0, 2.0), (0.0, 0.0, 0.0), true)
+                .step(
+                    1e-4,
+                    Vec2::new(0.0, 2.0),
+                    (0.0, 0.0, 0.0),
+                    SetpointOffset::default(),
+                    true,
+                )
                 .position;
         }
         c.set_tangent(0.2);
         let next = c
-            .step(1e-4, Vec2::new(0.0, 2.0), (0.0, 0.0, 0.0), true)
+            .step(
+                1e-4,
+                Vec2::new(0.0, 2.0),
+                (0.0, 0.0, 0.0),
+                SetpointOffset::default(),
+                true,
+            )
             .position;
         assert!((next - last).norm() < 1e-5, "jump {:?}", next - last);
         assert!((c.frame().tangent_angle - 0.2).abs() < 1e-15);
@@ -332,10 +374,22 @@ mod tests {
         let frame = TaskFrame::new(Vec2::zeros(), 0.0);
         let mut c = HybridController::new(HybridParams::default(), frame, 1000.0);
         c.set_velocity(0.02);
-        c.step(1e-4, Vec2::zeros(), (0.0, 0.0, 0.0), false);
+        c.step(
+            1e-4,
+            Vec2::zeros(),
+            (0.0, 0.0, 0.0),
+            SetpointOffset::default(),
+            false,
+        );
         assert!((c.nominal_velocity() - 0.2 * 1e-4).abs() < 1e-15);
         for _ in 0..2000 {
-            c.step(1e-4, Vec2::zeros(), (0.0, 0.0, 0.0), false);
+            c.step(
+                1e-4,
+                Vec2::zeros(),
+                (0.0, 0.0, 0.0),
+                SetpointOffset::default(),
+                false,
+            );
         }
         assert!((c.nominal_velocity() - 0.02).abs() < 1e-15);
     }

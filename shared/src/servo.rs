@@ -9,9 +9,11 @@
 use crate::arm::{Arm, ArmParams, Elbow, JointServo, PidGains, tune_pid_for_bandwidth};
 use crate::dither::{Dither, DitherParams};
 use crate::friction::FrictionLaw;
-use crate::hybrid::{HybridCommand, HybridController, HybridParams, TaskFrame};
+use crate::hybrid::{HybridCommand, HybridController, HybridParams, SetpointOffset, TaskFrame};
 use crate::math::Vec2;
+use crate::probe::ProbeRunner;
 use crate::sensor::Wrench;
+use crate::tangent::{ProbePlan, ProbeSample, TangentOutcome, TangentParams};
 use crate::tuner::{Tuner, TunerConfig, TunerContext, TunerInput, TunerReport};
 use nalgebra::{Matrix2, Vector2};
 use serde::{Deserialize, Serialize};
@@ -44,6 +46,111 @@ pub struct ServoParams {
     /// to the PID torques. Without it the dither's joint-2 acceleration couples into joint 1
     /// through M12 away from the decoupled point and shakes the normal force.
     pub inertia_feedforward: bool,
+    /// Add the joint torques that transmit the preload along the estimated normal,
+    /// `−J(q)ᵀ F_d n̂`, recomputed every tick. Without it the joint integrators hold the preload
+    /// as a fixed torque, and the force it transmits changes with the configuration as the tool
+    /// moves (0.25 % per mm here), which tilts the tangent estimate by about 0.35°.
+    pub preload_feedforward: bool,
+    /// Tangent-estimation probes (thesis §5.3).
+    pub tangent: TangentParams,
+    /// When to start a tangent estimation on its own (thesis §5.3.2).
+    pub tracking: TrackingParams,
+}
+
+/// Limits on the force feedback that start a tangent estimation (thesis §5.3.2: "a sudden
+/// change in force level ... could signal loss of contact or attempts to push into the
+/// environment"), plus the drift of the force loop's normal set-point per unit of travel,
+/// which is the tangent error the force loop is absorbing.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrackingParams {
+    /// Trigger estimations automatically.
+    pub enabled: bool,
+    /// Trigger when the filtered normal force leaves the preload by this fraction.
+    pub force_trigger_fraction: f64,
+    /// Time constant of the normal-force filter for the trigger (s).
+    pub force_filter_s: f64,
+    /// Trigger when the normal set-point drifts by this angle against the travel (deg).
+    pub slope_trigger_deg: f64,
+    /// Travel over which the drift is judged (m).
+    pub slope_window_m: f64,
+    /// Travel after an estimate before the drift and travel triggers re-arm (m).
+    pub min_travel_m: f64,
+    /// Estimate at least every this much travel (m); 0 disables.
+    pub max_travel_m: f64,
+}
+
+impl Default for TrackingParams {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            force_trigger_fraction: 0.2,
+            force_filter_s: 0.005,
+            slope_trigger_deg: 1.5,
+            slope_window_m: 0.002,
+            min_travel_m: 0.001,
+            max_travel_m: 0.0,
+        }
+    }
+}
+
+/// What the fast loop is doing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ServoMode {
+    /// Hybrid control along the estimated tangent.
+    #[default]
+    Track,
+    /// Decelerating to a stop before probing.
+    Stopping,
+    /// Running tangent-probe strokes.
+    Probing,
+    /// Strokes done; holding the preload until the estimate arrives.
+    AwaitingEstimate,
+}
+
+/// Why an estimation started.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Trigger {
+    /// Asked for by the caller.
+    Request,
+    /// The normal force left its band.
+    Force,
+    /// The normal set-point drifted against the travel.
+    Slope,
+    /// Periodic, by travel.
+    Travel,
+}
+
+/// A finished probe run waiting for the estimator.
+#[derive(Debug, Clone, Copy)]
+pub struct ProbeRequest<'a> {
+    /// The plan that ran.
+    pub plan: &'a ProbePlan,
+    /// Estimated tangent angle the offsets refer to (rad).
+    pub base_angle: f64,
+    /// Recorded samples.
+    pub samples: &'a [ProbeSample],
+    /// True when this run is a re-probe.
+    pub reprobe: bool,
+}
+
+/// Counters of the tangent estimation.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct EstimationCounters {
+    /// Estimations started.
+    pub started: usize,
+    /// Accepted estimates.
+    pub estimates: usize,
+    /// Re-probes asked for.
+    pub reprobes: usize,
+    /// Failed estimations (tangent kept).
+    pub failures: usize,
+    /// Started by the force limit.
+    pub force_triggers: usize,
+    /// Started by the set-point drift.
+    pub slope_triggers: usize,
 }
 
 impl Default for ServoParams {
@@ -60,6 +167,9 @@ impl Default for ServoParams {
             friction_model_reference_n: 2.5,
             tool_mass_kg: 0.05,
             inertia_feedforward: true,
+            preload_feedforward: true,
+            tangent: TangentParams::default(),
+            tracking: TrackingParams::default(),
         }
     }
 }
@@ -161,6 +271,10 @@ pub struct ServoDiag {
     pub torque: Vector2<f64>,
     /// True if the last set-point was out of reach (held).
     pub setpoint_held: bool,
+    /// Mode.
+    pub mode: ServoMode,
+    /// Estimated tangent angle in use (rad).
+    pub tangent_angle_rad: f64,
 }
 
 /// The fast loop.
@@ -180,7 +294,19 @@ pub struct ServoCore {
     tare: Wrench,
     last_q_d: Vector2<f64>,
     diag: ServoDiag,
+    mode: ServoMode,
+    probe: ProbeRunner,
+    reprobe: bool,
+    resume_velocity: f64,
+    normal_filtered: f64,
+    force_armed: bool,
+    counters: EstimationCounters,
+    last_outcome: Option<TangentOutcome>,
+    last_trigger: Option<Trigger>,
 }
+
+/// Probe samples are recorded every this many servo ticks (1 kHz at 10 kHz).
+pub const PROBE_DECIMATION: usize = 10;
 
 /// The PID joint servos' Cartesian stiffness along direction `n` at `q`:
 /// `1 / (nᵀ J Kp⁻¹ Jᵀ n)` (N/m).
@@ -216,7 +342,14 @@ impl ServoCore {
         });
         let mut pid = JointServo::new(gains, arm_params.torque_limit_nm);
         let f0 = Self::to_world(&arm, q0, wrench0);
-        pid.preset_torque(-(arm.jacobian(q0).transpose() * f0));
+        let mut hold = -(arm.jacobian(q0).transpose() * f0);
+        if params.preload_feedforward {
+            // The feedforward carries the preload along the estimated normal; the integrators
+            // start with the rest.
+            let n0 = crate::math::perp(crate::math::unit(tangent_angle));
+            hold -= -(arm.jacobian(q0).transpose() * (n0 * params.hybrid.preload_n));
+        }
+        pid.preset_torque(hold);
         let frame = TaskFrame::new(arm.forward(q0), tangent_angle);
         let k_servo = servo_stiffness_along(&arm, q0, [gains[0].kp, gains[1].kp], frame.normal());
         let hybrid = HybridController::new(params.hybrid, frame, k_servo);
@@ -234,6 +367,11 @@ impl ServoCore {
             tool_mass_kg: params.tool_mass_kg,
         };
         let tuner = Tuner::new(&params.tuner, &ctx, 0.0);
+        let probe_capacity = [params.tangent.first_plan(), params.tangent.reprobe_plan()]
+            .iter()
+            .map(|p| ProbeRunner::samples_needed(p, params.rate_hz, PROBE_DECIMATION))
+            .max()
+            .unwrap_or(0);
         Ok(Self {
             params,
             arm,
@@ -249,6 +387,15 @@ impl ServoCore {
             tare: Wrench::default(),
             last_q_d: q0,
             diag: ServoDiag::default(),
+            mode: ServoMode::Track,
+            probe: ProbeRunner::new(probe_capacity, PROBE_DECIMATION),
+            reprobe: false,
+            resume_velocity: 0.0,
+            normal_filtered: params.hybrid.preload_n,
+            force_armed: true,
+            counters: EstimationCounters::default(),
+            last_outcome: None,
+            last_trigger: None,
         })
     }
 
@@ -337,6 +484,133 @@ impl ServoCore {
         &self.diag
     }
 
+    /// Current mode.
+    pub fn mode(&self) -> ServoMode {
+        self.mode
+    }
+
+    /// Estimation counters.
+    pub fn counters(&self) -> EstimationCounters {
+        self.counters
+    }
+
+    /// The last estimator answer applied.
+    pub fn last_outcome(&self) -> Option<&TangentOutcome> {
+        self.last_outcome.as_ref()
+    }
+
+    /// What started the last estimation.
+    pub fn last_trigger(&self) -> Option<Trigger> {
+        self.last_trigger
+    }
+
+    /// Starts a tangent estimation: stop, then probe (thesis §5.3.2). Ignored unless tracking.
+    pub fn request_tangent_estimate(&mut self) {
+        if self.mode == ServoMode::Track {
+            self.begin_estimation(Trigger::Request);
+        }
+    }
+
+    fn begin_estimation(&mut self, why: Trigger) {
+        self.counters.started += 1;
+        match why {
+            Trigger::Force => self.counters.force_triggers += 1,
+            Trigger::Slope => self.counters.slope_triggers += 1,
+            _ => {}
+        }
+        self.last_trigger = Some(why);
+        self.resume_velocity = self.hybrid.velocity_target();
+        self.hybrid.set_velocity(0.0);
+        self.mode = ServoMode::Stopping;
+    }
+
+    /// The finished probe run, while the servo waits for its estimate.
+    pub fn pending_probe(&self) -> Option<ProbeRequest<'_>> {
+        (self.mode == ServoMode::AwaitingEstimate).then(|| ProbeRequest {
+            plan: self.probe.plan(),
+            base_angle: self.probe.base_angle(),
+            samples: self.probe.samples(),
+            reprobe: self.reprobe,
+        })
+    }
+
+    /// Applies the estimator's answer: feed the new tangent forward and resume, run the
+    /// re-probe plan, or keep the old tangent and resume.
+    pub fn apply_tangent_outcome(&mut self, outcome: &TangentOutcome) {
+        if self.mode != ServoMode::AwaitingEstimate {
+            return;
+        }
+        self.last_outcome = Some(*outcome);
+        match outcome {
+            TangentOutcome::Estimate(e) => {
+                self.counters.estimates += 1;
+                self.hybrid.set_tangent(e.tangent_angle_rad);
+                self.resume();
+            }
+            TangentOutcome::Reprobe { plan, .. } => {
+                self.counters.reprobes += 1;
+                self.reprobe = true;
+                let plan = self.plan_with_dither(*plan);
+                self.probe.start(plan, self.hybrid.frame().tangent_angle);
+                self.mode = ServoMode::Probing;
+            }
+            TangentOutcome::Failed(_) => {
+                self.counters.failures += 1;
+                self.resume();
+            }
+        }
+    }
+
+    fn plan_with_dither(&self, mut plan: ProbePlan) -> ProbePlan {
+        plan.dither_hz = if self.dither.amplitude() > 0.0 {
+            self.params.dither.frequency_hz
+        } else {
+            0.0
+        };
+        plan
+    }
+
+    fn resume(&mut self) {
+        self.probe.reset();
+        self.reprobe = false;
+        self.mode = ServoMode::Track;
+        self.force_armed = false;
+        self.hybrid.set_velocity(self.resume_velocity);
+    }
+
+    fn check_triggers(&mut self, dt: f64, normal: f64) {
+        let t = self.params.tracking;
+        let preload = self.hybrid.params().preload_n;
+        if t.force_filter_s > 0.0 {
+            self.normal_filtered +=
+                (dt / t.force_filter_s).min(1.0) * (normal - self.normal_filtered);
+        } else {
+            self.normal_filtered = normal;
+        }
+        let deviation = (self.normal_filtered - preload).abs() / preload;
+        if deviation < 0.5 * t.force_trigger_fraction {
+            self.force_armed = true;
+        }
+        if !t.enabled || self.mode != ServoMode::Track || self.hybrid.velocity_target() == 0.0 {
+            return;
+        }
+        if self.force_armed && deviation > t.force_trigger_fraction {
+            self.force_armed = false;
+            self.begin_estimation(Trigger::Force);
+            return;
+        }
+        let travel = self.hybrid.travel().abs();
+        if travel < t.min_travel_m.max(t.slope_window_m) {
+            return;
+        }
+        let drift = self.hybrid.depth().atan2(travel).abs();
+        if drift > t.slope_trigger_deg.to_radians() {
+            self.begin_estimation(Trigger::Slope);
+        } else if t.max_travel_m > 0.0 && travel > t.max_travel_m {
+            self.begin_estimation(Trigger::Travel);
+        }
+    }
+
     /// One fast-loop tick: returns the joint torques (N·m).
     pub fn step(&mut self, inp: &ServoInput, dt: f64) -> Vector2<f64> {
         let valid = inp.force_valid
@@ -354,9 +628,28 @@ impl ServoCore {
             Vec2::zeros()
         };
         let dither = self.dither.step(dt);
-        let cmd: HybridCommand = self
-            .hybrid
-            .step(dt, force, dither, valid && self.force_control);
+        let mut extra = SetpointOffset::default();
+        match self.mode {
+            ServoMode::Stopping if self.hybrid.nominal_velocity() == 0.0 => {
+                let plan = self.plan_with_dither(self.params.tangent.first_plan());
+                self.probe.start(plan, self.hybrid.frame().tangent_angle);
+                self.reprobe = false;
+                self.mode = ServoMode::Probing;
+            }
+            ServoMode::Probing => {
+                extra = self.probe.step(dt, force, self.arm.forward_at(&pose));
+                if self.probe.finished() {
+                    self.mode = ServoMode::AwaitingEstimate;
+                }
+            }
+            _ => {}
+        }
+        let probing = self.mode == ServoMode::Probing;
+        let force_loop = valid && self.force_control && !probing;
+        // Frozen integrators make the stroke response stationary (they would otherwise relax a
+        // DC offset picked up in the ramp-in over their ~1 s time constant).
+        self.pid.set_integrating(!probing);
+        let cmd: HybridCommand = self.hybrid.step(dt, force, dither, extra, force_loop);
         let mut held = false;
         let (q_d, pose_d) = match self.arm.inverse_pose(cmd.position, self.elbow) {
             Ok(x) => x,
@@ -380,11 +673,16 @@ impl ServoCore {
             None => (Vector2::zeros(), Vector2::zeros()),
         };
         self.last_q_d = q_d;
-        let feedforward = if self.params.inertia_feedforward {
+        let mut feedforward = if self.params.inertia_feedforward {
             self.arm.inverse_dynamics_at(&pose_d, qd_d, qdd_d)
         } else {
             Vector2::zeros()
         };
+        if self.params.preload_feedforward && valid {
+            let n_hat = self.hybrid.frame().normal();
+            feedforward -=
+                self.arm.jacobian_at(&pose).transpose() * (n_hat * self.hybrid.params().preload_n);
+        }
         let tau = self.pid.torque(q_d, qd_d, inp.q, inp.qd, feedforward, dt);
 
         // Tuner: friction resisting the nominal motion, normalised to the model's reference force.
@@ -404,7 +702,10 @@ impl ServoCore {
         };
         let friction = -cmd.tangential_force_n * dir * ratio;
         let nominal = self.hybrid.nominal_velocity().abs();
-        if self.tuning && valid && nominal > 0.0 {
+        if valid {
+            self.check_triggers(dt, normal);
+        }
+        if self.tuning && valid && nominal > 0.0 && self.mode == ServoMode::Track {
             let input = TunerInput {
                 friction_n: friction,
                 velocity_m_per_s: v_tan * dir,
@@ -428,6 +729,8 @@ impl ServoCore {
             tangent_velocity_m_per_s: v_tan,
             torque: tau,
             setpoint_held: held,
+            mode: self.mode,
+            tangent_angle_rad: self.hybrid.frame().tangent_angle,
         };
         tau
     }
