@@ -36,6 +36,10 @@ pub fn run(name: &str, opts: &Options, out_dir: &Path) -> Result<(Value, bool)> 
         "fig4.7" => pack(experiments::fig4_7(opts))?,
         "fig4.8" => pack(experiments::fig4_8(opts))?,
         "tangent" => pack(experiments::tangent(opts))?,
+        "fig5.6" => pack(experiments::fig5_6(opts))?,
+        "corners" => pack(experiments::corners(opts))?,
+        "fig5.3" => pack(experiments::fig5_3(opts))?,
+        "fig5.9" => pack(experiments::fig5_9(opts))?,
         other => bail!(
             "unknown experiment '{other}'; choose one of: {}",
             experiments::NAMES.join(", ")

@@ -243,9 +243,33 @@ impl HybridController {
         self.s
     }
 
+    /// Rate of the normal set-point from the force loop (m/s, + into the surface).
+    pub fn depth_rate(&self) -> f64 {
+        self.depth_rate
+    }
+
+    /// The normal set-point rate the force loop would command for a measured normal force
+    /// `normal` (m/s): `ω_f (F_d − F_N)/k̂`, clamped. Linear in F_N, so feeding it an average
+    /// force gives the average rate.
+    pub fn depth_rate_for(&self, normal: f64) -> f64 {
+        let omega = std::f64::consts::TAU * self.params.force_bandwidth_hz;
+        let rate = omega * (self.params.preload_n - normal) / self.hooke_stiffness;
+        let lim = self.params.max_normal_rate_m_per_s;
+        rate.clamp(-lim, lim)
+    }
+
     /// Normal set-point into the surface since the frame was last re-based (m).
     pub fn depth(&self) -> f64 {
         self.depth
+    }
+
+    /// Sets the normal set-point (m into the surface from the frame origin), for position
+    /// control along the normal while the force loop is off (the preliminary correlation
+    /// method of §5.2 drives it this way).
+    pub fn set_normal_setpoint(&mut self, depth: f64) {
+        if depth.is_finite() {
+            self.depth = depth;
+        }
     }
 
     /// Moves the normal set-point by `delta` (m, + into the surface), e.g. to back off.
@@ -280,10 +304,7 @@ impl HybridController {
         self.s += self.s_dot * dt;
         // Hooke's-law force loop along x (selection R = diag(1, 0)).
         self.depth_rate = if force_control {
-            let omega = std::f64::consts::TAU * self.params.force_bandwidth_hz;
-            let rate = omega * (self.params.preload_n - f_n) / self.hooke_stiffness;
-            let lim = self.params.max_normal_rate_m_per_s;
-            rate.clamp(-lim, lim)
+            self.depth_rate_for(f_n)
         } else {
             0.0
         };

@@ -2,12 +2,14 @@
 #![warn(missing_docs)]
 
 pub mod arm;
+pub mod correlation;
 pub mod dither;
 pub mod experiments;
 pub mod friction;
 pub mod hybrid;
 pub mod ident;
 pub mod math;
+pub mod multicontact;
 pub mod plant;
 pub mod probe;
 pub mod sensor;

@@ -66,18 +66,29 @@ pub struct ServoParams {
 pub struct TrackingParams {
     /// Trigger estimations automatically.
     pub enabled: bool,
-    /// Trigger when the filtered normal force leaves the preload by this fraction.
+    /// Trigger when the normal force, averaged over one period of the friction-suppression
+    /// dither (which removes the dither's own ripple), leaves the preload by this fraction.
     pub force_trigger_fraction: f64,
-    /// Time constant of the normal-force filter for the trigger (s).
+    /// Further first-order smoothing of that average (s).
     pub force_filter_s: f64,
-    /// Trigger when the normal set-point drifts by this angle against the travel (deg).
+    /// Trigger when the normal set-point drifts by this angle against the travel (deg): the
+    /// force loop's set-point rate over the nominal speed, low-passed over `slope_window_m`, is
+    /// the tangent error it is absorbing.
     pub slope_trigger_deg: f64,
-    /// Travel over which the drift is judged (m).
+    /// Travel over which the drift is averaged (m).
     pub slope_window_m: f64,
     /// Travel after an estimate before the drift and travel triggers re-arm (m).
     pub min_travel_m: f64,
     /// Estimate at least every this much travel (m); 0 disables.
     pub max_travel_m: f64,
+    /// Turn the tangent between estimates at the curvature the last two estimates imply.
+    pub curvature_feedforward: bool,
+    /// Largest curvature fed forward (1/m). Two estimates implying more are taken to straddle a
+    /// corner, not a curve, and no curvature is fed forward.
+    pub max_curvature_per_m: f64,
+    /// A change of tangent larger than this between two estimates is a corner whatever the
+    /// distance (deg).
+    pub corner_angle_deg: f64,
 }
 
 impl Default for TrackingParams {
@@ -85,11 +96,14 @@ impl Default for TrackingParams {
         Self {
             enabled: false,
             force_trigger_fraction: 0.2,
-            force_filter_s: 0.005,
-            slope_trigger_deg: 1.5,
+            force_filter_s: 0.002,
+            slope_trigger_deg: 0.75,
             slope_window_m: 0.002,
             min_travel_m: 0.001,
             max_travel_m: 0.0,
+            curvature_feedforward: true,
+            max_curvature_per_m: 10.0,
+            corner_angle_deg: 5.0,
         }
     }
 }
@@ -107,6 +121,8 @@ pub enum ServoMode {
     Probing,
     /// Strokes done; holding the preload until the estimate arrives.
     AwaitingEstimate,
+    /// Estimate applied; holding until the normal force is back at the preload, then moving on.
+    Resuming,
 }
 
 /// Why an estimation started.
@@ -303,6 +319,22 @@ pub struct ServoCore {
     counters: EstimationCounters,
     last_outcome: Option<TangentOutcome>,
     last_trigger: Option<Trigger>,
+    /// Arc length travelled since the last accepted estimate (m).
+    odometer: f64,
+    /// Arc length travelled in all (m).
+    odometer_total: f64,
+    /// Last accepted estimate: (tangent angle rad, odometer_total m).
+    last_estimate: Option<(f64, f64)>,
+    /// Curvature fed forward (1/m) and the angle it turns from (rad).
+    curvature: f64,
+    curve_base: f64,
+    /// Low-passed tangent error the force loop is absorbing (rad).
+    drift: f64,
+    /// Time spent stopped, and time the normal force has been back at the preload (s).
+    stopped_s: f64,
+    settled_s: f64,
+    /// Normal force over the last dither period (moving average, allocated once).
+    normal_window: crate::window::SlidingWindow,
 }
 
 /// Probe samples are recorded every this many servo ticks (1 kHz at 10 kHz).
@@ -396,6 +428,19 @@ impl ServoCore {
             counters: EstimationCounters::default(),
             last_outcome: None,
             last_trigger: None,
+            odometer: 0.0,
+            odometer_total: 0.0,
+            last_estimate: None,
+            curvature: 0.0,
+            curve_base: tangent_angle,
+            drift: 0.0,
+            stopped_s: 0.0,
+            settled_s: 0.0,
+            normal_window: crate::window::SlidingWindow::new(
+                (params.rate_hz / params.dither.frequency_hz)
+                    .round()
+                    .max(1.0) as usize,
+            ),
         })
     }
 
@@ -519,6 +564,8 @@ impl ServoCore {
             _ => {}
         }
         self.last_trigger = Some(why);
+        self.stopped_s = 0.0;
+        self.settled_s = 0.0;
         self.resume_velocity = self.hybrid.velocity_target();
         self.hybrid.set_velocity(0.0);
         self.mode = ServoMode::Stopping;
@@ -544,7 +591,25 @@ impl ServoCore {
         match outcome {
             TangentOutcome::Estimate(e) => {
                 self.counters.estimates += 1;
-                self.hybrid.set_tangent(e.tangent_angle_rad);
+                let t = self.params.tracking;
+                let angle = e.tangent_angle_rad;
+                self.curvature = match self.last_estimate {
+                    Some((prev, at)) if t.curvature_feedforward => {
+                        let ds = self.odometer_total - at;
+                        let dth = crate::math::wrap_angle(angle - prev);
+                        let corner = dth.abs() > t.corner_angle_deg.to_radians()
+                            || self.last_trigger == Some(Trigger::Force)
+                            || ds <= 1e-3
+                            || (dth / ds).abs() > t.max_curvature_per_m;
+                        if corner { 0.0 } else { dth / ds }
+                    }
+                    _ => 0.0,
+                };
+                self.last_estimate = Some((angle, self.odometer_total));
+                self.curve_base = angle;
+                self.odometer = 0.0;
+                self.drift = 0.0;
+                self.hybrid.set_tangent(angle);
                 self.resume();
             }
             TangentOutcome::Reprobe { plan, .. } => {
@@ -573,19 +638,51 @@ impl ServoCore {
     fn resume(&mut self) {
         self.probe.reset();
         self.reprobe = false;
-        self.mode = ServoMode::Track;
-        self.force_armed = false;
-        self.hybrid.set_velocity(self.resume_velocity);
+        self.stopped_s = 0.0;
+        self.settled_s = 0.0;
+        self.mode = ServoMode::Resuming;
+    }
+
+    /// While stopped with the force loop on: true once the dither-period mean of the normal force
+    /// has stayed within 5 % of the preload for the probe hold time, or after 3 s.
+    fn force_settled(&mut self, dt: f64) -> bool {
+        self.stopped_s += dt;
+        let preload = self.hybrid.params().preload_n;
+        if (self.normal_filtered - preload).abs() < 0.05 * preload {
+            self.settled_s += dt;
+        } else {
+            self.settled_s = 0.0;
+        }
+        self.settled_s >= self.params.tangent.settle_s || self.stopped_s > 3.0
     }
 
     fn check_triggers(&mut self, dt: f64, normal: f64) {
         let t = self.params.tracking;
+        // Odometer, curvature feedforward and the drift the force loop absorbs.
+        let v = self.hybrid.nominal_velocity();
+        if self.mode == ServoMode::Track && v != 0.0 {
+            let ds = v.abs() * dt;
+            self.odometer += ds;
+            self.odometer_total += ds;
+            if t.curvature_feedforward && self.curvature != 0.0 {
+                let angle = self.curve_base + self.curvature * self.odometer * v.signum();
+                self.hybrid.set_tangent(angle);
+            }
+        }
         let preload = self.hybrid.params().preload_n;
+        self.normal_window.push(normal);
+        let period_mean = self.normal_window.mean();
+        if self.mode == ServoMode::Track && v != 0.0 {
+            // The set-point rate for the dither-period mean force: free of the dither's ripple.
+            let window_s = t.slope_window_m / v.abs();
+            let instant = (self.hybrid.depth_rate_for(period_mean) / v).atan();
+            self.drift += (dt / window_s.max(dt)).min(1.0) * (instant - self.drift);
+        }
         if t.force_filter_s > 0.0 {
             self.normal_filtered +=
-                (dt / t.force_filter_s).min(1.0) * (normal - self.normal_filtered);
+                (dt / t.force_filter_s).min(1.0) * (period_mean - self.normal_filtered);
         } else {
-            self.normal_filtered = normal;
+            self.normal_filtered = period_mean;
         }
         let deviation = (self.normal_filtered - preload).abs() / preload;
         if deviation < 0.5 * t.force_trigger_fraction {
@@ -594,17 +691,19 @@ impl ServoCore {
         if !t.enabled || self.mode != ServoMode::Track || self.hybrid.velocity_target() == 0.0 {
             return;
         }
-        if self.force_armed && deviation > t.force_trigger_fraction {
+        if self.force_armed
+            && deviation > t.force_trigger_fraction
+            && self.odometer >= t.min_travel_m
+        {
             self.force_armed = false;
             self.begin_estimation(Trigger::Force);
             return;
         }
-        let travel = self.hybrid.travel().abs();
+        let travel = self.odometer;
         if travel < t.min_travel_m.max(t.slope_window_m) {
             return;
         }
-        let drift = self.hybrid.depth().atan2(travel).abs();
-        if drift > t.slope_trigger_deg.to_radians() {
+        if self.drift.abs() > t.slope_trigger_deg.to_radians() {
             self.begin_estimation(Trigger::Slope);
         } else if t.max_travel_m > 0.0 && travel > t.max_travel_m {
             self.begin_estimation(Trigger::Travel);
@@ -629,12 +728,23 @@ impl ServoCore {
         };
         let dither = self.dither.step(dt);
         let mut extra = SetpointOffset::default();
-        match self.mode {
-            ServoMode::Stopping if self.hybrid.nominal_velocity() == 0.0 => {
+        let mode = self.mode;
+        match mode {
+            // Probe only once the force loop has brought the normal force back to the preload
+            // (it is frozen during the strokes), or after waiting 3 s.
+            ServoMode::Stopping
+                if self.hybrid.nominal_velocity() == 0.0 && self.force_settled(dt) =>
+            {
                 let plan = self.plan_with_dither(self.params.tangent.first_plan());
                 self.probe.start(plan, self.hybrid.frame().tangent_angle);
                 self.reprobe = false;
                 self.mode = ServoMode::Probing;
+            }
+            ServoMode::Resuming if self.force_settled(dt) => {
+                self.mode = ServoMode::Track;
+                self.force_armed = false;
+                self.drift = 0.0;
+                self.hybrid.set_velocity(self.resume_velocity);
             }
             ServoMode::Probing => {
                 extra = self.probe.step(dt, force, self.arm.forward_at(&pose));

@@ -312,7 +312,15 @@ mod tests {
         };
         let err = (e.tangent_angle_rad - log.true_angle_rad).to_degrees();
         assert!(err.abs() < 0.1, "error {err}° ({e:?})");
+        // It holds until the normal force is back at the preload, then tracks again.
+        assert_eq!(sim.servo().mode(), crate::servo::ServoMode::Resuming);
+        let mut n = 0;
+        while sim.servo().mode() != crate::servo::ServoMode::Track && n < 40_000 {
+            sim.step();
+            n += 1;
+        }
         assert_eq!(sim.servo().mode(), crate::servo::ServoMode::Track);
+        assert!((sim.servo().hybrid().frame().tangent_angle - e.tangent_angle_rad).abs() < 1e-12);
     }
 
     /// Same seed, same run, bit for bit.

@@ -18,9 +18,11 @@
 //! | `fig5.9`      | figs. 5.9, 5.10   | a box rotated into a corner about its estimated rotation centre |
 
 mod friction;
+mod multicontact;
 mod tracking;
 
 pub use friction::*;
+pub use multicontact::*;
 pub use tracking::*;
 
 use crate::sim::{Lockstep, SimConfig};
@@ -49,13 +51,17 @@ impl Default for Options {
 }
 
 /// The experiment names, in the order the README lists them.
-pub const NAMES: [&str; 6] = [
+pub const NAMES: [&str; 10] = [
     "friction-id",
     "fig4.5",
     "fig4.6",
     "fig4.7",
     "fig4.8",
     "tangent",
+    "fig5.3",
+    "fig5.6",
+    "corners",
+    "fig5.9",
 ];
 
 /// One data series of a plot.

@@ -1,0 +1,366 @@
+//! Multiple-point contact (thesis §5.4, figs. 5.9–5.10): a box rotated into a corner about its
+//! estimated instantaneous centre of rotation.
+
+use super::*;
+use crate::math::{Vec2, cross};
+use crate::multicontact::{
+    BoxParams, BoxPlant, Pose, friction_filter, rotation_centre, thesis_rotation_centre,
+};
+use crate::sensor::{SensorModel, SensorParams, Wrench};
+use serde::Serialize;
+
+/// One estimate of the rotation centre.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct CentreEstimate {
+    /// Time (s).
+    pub t_s: f64,
+    /// Box tilt when estimated (deg).
+    pub tilt_deg: f64,
+    /// True centre (m).
+    pub truth_m: [f64; 2],
+    /// Signed three-dither estimate (m).
+    pub estimate_m: [f64; 2],
+    /// Its error as a fraction of the box size.
+    pub error_fraction: f64,
+    /// The thesis's unsigned form with the third dither choosing the root (m).
+    pub thesis_m: Option<[f64; 2]>,
+    /// Its error as a fraction of the box size.
+    pub thesis_error_fraction: Option<f64>,
+    /// Friction filter (eqs. 5.11–5.18) on the mean wrench of the first dither, with the
+    /// estimated centre: the friction resultant it attributes (N).
+    pub friction_estimated_n: Option<[f64; 2]>,
+    /// The true mean friction resultant over the same window (N).
+    pub friction_true_n: [f64; 2],
+}
+
+/// Summary of `fig5.9`.
+#[derive(Debug, Clone, Serialize)]
+pub struct Fig59Summary {
+    /// Box size (m).
+    pub size_m: [f64; 2],
+    /// Initial tilt (deg).
+    pub initial_tilt_deg: f64,
+    /// Final tilt (deg).
+    pub final_tilt_deg: f64,
+    /// Dither amplitude (deg) and frequency (Hz).
+    pub dither_deg: f64,
+    /// Frequency (Hz).
+    pub dither_hz: f64,
+    /// Sensor noise (N).
+    pub noise_n: f64,
+    /// Largest error of the signed estimate, as a fraction of the box size.
+    pub max_error_fraction: f64,
+    /// Largest error of the thesis's form.
+    pub thesis_max_error_fraction: f64,
+    /// Per estimate.
+    pub estimates: Vec<CentreEstimate>,
+}
+
+/// (time s, dither phase rad, force N, moment about the box centre N·m, box centre m).
+type WrenchSample = (f64, f64, Vec2, f64, Vec2);
+
+struct Rig {
+    plant: BoxPlant,
+    sensor: SensorModel,
+    target: Pose,
+    t: f64,
+    dt: f64,
+    sensor_period: f64,
+    next_sample: f64,
+    reading: Wrench,
+    trace: Vec<[f64; 5]>,
+}
+
+impl Rig {
+    fn step(&mut self, target: Pose, target_vel: [f64; 3]) {
+        self.plant.step(target, target_vel, self.dt);
+        self.t += self.dt;
+        while self.next_sample <= self.t {
+            let tr = self.plant.truth();
+            self.reading = self
+                .sensor
+                .sample(Wrench {
+                    force: tr.force,
+                    torque: tr.moment,
+                })
+                .wrench;
+            self.next_sample += self.sensor_period;
+        }
+        if ((self.t / self.dt).round() as u64).is_multiple_of(200)
+            && let Some(p) = self.plant.truth().rotation_centre
+        {
+            self.trace
+                .push([self.t, p.x, p.y, self.plant.pose()[2], 0.0]);
+        }
+    }
+}
+
+/// Keeps both contacts loaded for 0.5 s: a slow force loop on the commanded position (grip in
+/// series with the contact ≈ 3.3 kN/m, crossover ≈ 2 Hz), with the suppression dither on so
+/// static friction does not hold part of the preload.
+fn settle(rig: &mut Rig, p_hat: Vec2, tare: Vec2, target: Vec2, supp_amp: f64, supp_hz: f64) {
+    for _ in 0..5000 {
+        let f = rig.reading.force - tare;
+        let gain = std::f64::consts::TAU * 2.0 / 3300.0 * rig.dt;
+        rig.target[0] -= gain * (target.x - f.x);
+        rig.target[1] -= gain * (target.y - f.y);
+        let supp = supp_amp * (std::f64::consts::TAU * supp_hz * rig.t).sin();
+        let t = rotate_about(rig.target, p_hat, supp);
+        rig.step(t, [0.0; 3]);
+    }
+}
+
+/// The commanded pose rotated by `angle` about `centre`.
+fn rotate_about(pose: Pose, centre: Vec2, angle: f64) -> Pose {
+    let (s, c) = angle.sin_cos();
+    let d = Vec2::new(pose[0], pose[1]) - centre;
+    [
+        centre.x + c * d.x - s * d.y,
+        centre.y + s * d.x + c * d.y,
+        pose[2] + angle,
+    ]
+}
+
+/// Rotates the box, held by a compliant grip and pushed into a corner (floor and wall), from a
+/// 20° tilt into the corner in 2° steps about its estimated instantaneous centre of rotation;
+/// before each step the centre is re-estimated from three rotational dithers (0.5°, 2 Hz)
+/// about P̂, P̂ + 10 mm x̂ and P̂ + 10 mm ŷ. Sensor noise σ = 0.02 N.
+pub fn fig5_9(opts: &Options) -> Result<Outcome<Fig59Summary>, String> {
+    let params = BoxParams::default();
+    let size = params.size_m[0].max(params.size_m[1]);
+    let tilt0 = 20f64.to_radians();
+    let touch = BoxPlant::touching_pose(&params, tilt0);
+    let sensor_params = SensorParams {
+        noise_force_n: 0.02,
+        ..opts.base.sensor
+    };
+    let mut rig = Rig {
+        plant: BoxPlant::new(params, touch),
+        sensor: SensorModel::new(sensor_params, opts.seed),
+        target: [touch[0] - 0.0006, touch[1] - 0.0006, tilt0],
+        t: 0.0,
+        dt: 1e-4,
+        sensor_period: 1.0 / sensor_params.rate_hz,
+        next_sample: 0.0,
+        reading: Wrench::default(),
+        trace: Vec::new(),
+    };
+    let tare = crate::sim::tare(&mut rig.sensor);
+    let (amp, freq, periods, ramp) = (0.5f64.to_radians(), 2.0, 2usize, 0.25);
+    // Friction suppression during the estimation dithers: a 20 Hz rotational dither about P̂
+    // keeps the contacts sliding (thesis §6.3: the two dithers superposed).
+    let (supp_amp, supp_hz) = (0.5f64.to_radians(), 20.0);
+    let force_target = Vec2::new(2.0, 2.0);
+    let m = 0.01;
+    // Initial guess: the box centre (the thesis starts from the box's size and the forces).
+    let mut p_hat = Vec2::new(rig.target[0], rig.target[1]);
+    settle(&mut rig, p_hat, tare.force, force_target, supp_amp, supp_hz);
+    let mut estimates = Vec::new();
+    let mut steps = 0;
+    while rig.target[2] > 0.2f64.to_radians() && steps < 30 {
+        steps += 1;
+        let base = rig.target;
+        let centres = [p_hat, p_hat + Vec2::new(m, 0.0), p_hat + Vec2::new(0.0, m)];
+        let mut responses = [Vec2::zeros(); 3];
+        let mut rms = [[0.0; 2]; 3];
+        let mut records: Vec<Vec<WrenchSample>> = Vec::new();
+        let (mut f_sum, mut m_sum, mut n_mean) = (Vec2::zeros(), 0.0f64, 0.0f64);
+        let mut friction_sum = Vec2::zeros();
+        let truth_before = rig.plant.truth().rotation_centre;
+        for (k, c) in centres.iter().enumerate() {
+            let omega = std::f64::consts::TAU * freq;
+            let total = 2.0 * ramp + periods as f64 / freq;
+            let n = (total / rig.dt).round() as usize;
+            let mut wrenches: Vec<WrenchSample> = Vec::new();
+            for i in 0..n {
+                let tau = i as f64 * rig.dt;
+                let e = if tau < ramp {
+                    0.5 * (1.0 - (std::f64::consts::PI * tau / ramp).cos())
+                } else if tau > total - ramp {
+                    0.5 * (1.0 - (std::f64::consts::PI * (total - tau) / ramp).cos())
+                } else {
+                    1.0
+                };
+                let phase = omega * (tau - ramp);
+                let angle = amp * e * phase.sin();
+                let supp = supp_amp * (std::f64::consts::TAU * supp_hz * rig.t).sin();
+                let target = rotate_about(rotate_about(base, *c, angle), p_hat, supp);
+                let ang_vel = amp * e * omega * phase.cos();
+                let d = Vec2::new(target[0], target[1]) - c;
+                rig.step(target, [-ang_vel * d.y, ang_vel * d.x, ang_vel]);
+                if tau >= ramp && tau < ramp + periods as f64 / freq && i % 10 == 0 {
+                    let f = rig.reading.force - tare.force;
+                    let o = Vec2::new(target[0], target[1]);
+                    wrenches.push((rig.t, phase, f, rig.reading.torque - tare.torque, o));
+                    if k == 0 {
+                        friction_sum += rig.plant.truth().friction_resultant;
+                        f_sum += f;
+                        m_sum += rig.reading.torque - tare.torque;
+                        n_mean += 1.0;
+                    }
+                }
+            }
+            records.push(wrenches);
+        }
+        // In-phase response per radian of each dither (the suppression dither removed by a
+        // one-period comb).
+        let respond = |recs: &[Vec<WrenchSample>]| -> [Vec2; 3] {
+            let mut out = [Vec2::zeros(); 3];
+            for (k, rec) in recs.iter().enumerate() {
+                let series: Vec<(f64, f64, Vec2)> =
+                    rec.iter().map(|&(t, ph, f, _, _)| (t, ph, f)).collect();
+                let comp = |sel: fn(&Vec2) -> f64| -> f64 {
+                    let d: Vec<(f64, f64, f64)> =
+                        series.iter().map(|(t, ph, f)| (*t, *ph, sel(f))).collect();
+                    crate::tangent::in_phase_amplitude(&d, supp_hz).unwrap_or(0.0)
+                };
+                out[k] = Vec2::new(comp(|f| f.x), comp(|f| f.y)) / amp;
+            }
+            out
+        };
+        let raw = respond(&records);
+        for k in 0..3 {
+            responses[k] = raw[k];
+            rms[k] = [raw[k].x.abs() * amp, raw[k].y.abs() * amp];
+        }
+        let Some(est) = rotation_centre(&centres, &responses) else {
+            return Err("the rotation-centre estimate is singular".into());
+        };
+        let thesis = thesis_rotation_centre(centres[0], centres[1], centres[2], rms);
+        // Friction filter on the mean wrench of the first dither: moments about R = the corner.
+        let f_mean = f_sum / n_mean.max(1.0);
+        let o = Vec2::new(base[0], base[1]);
+        let m_r = m_sum / n_mean.max(1.0) + cross(o, f_mean);
+        let split = friction_filter(f_mean, m_r, est);
+        let truth = truth_before.unwrap_or(Vec2::new(f64::NAN, f64::NAN));
+        estimates.push(CentreEstimate {
+            t_s: rig.t,
+            tilt_deg: base[2].to_degrees(),
+            truth_m: [truth.x, truth.y],
+            estimate_m: [est.x, est.y],
+            error_fraction: (est - truth).norm() / size,
+            thesis_m: thesis.map(|p| [p.x, p.y]),
+            thesis_error_fraction: thesis.map(|p| (p - truth).norm() / size),
+            friction_estimated_n: split.map(|(_, t)| [t.x, t.y]),
+            friction_true_n: {
+                let ft = friction_sum / n_mean.max(1.0);
+                [ft.x, ft.y]
+            },
+        });
+        p_hat = est;
+        // Rotate towards the corner about the estimate, smoothly over 0.5 s.
+        let step = -(2f64.to_radians()).min(base[2]);
+        let n = (0.5 / rig.dt) as usize;
+        for i in 0..n {
+            let s = (i + 1) as f64 / n as f64;
+            let e = 0.5 * (1.0 - (std::f64::consts::PI * s).cos());
+            let target = rotate_about(base, p_hat, step * e);
+            rig.step(target, [0.0; 3]);
+        }
+        rig.target = rotate_about(base, p_hat, step);
+        settle(&mut rig, p_hat, tare.force, force_target, supp_amp, supp_hz);
+    }
+    let max_err = estimates
+        .iter()
+        .map(|e| e.error_fraction)
+        .fold(0.0, f64::max);
+    let thesis_max = estimates
+        .iter()
+        .filter_map(|e| e.thesis_error_fraction)
+        .fold(0.0, f64::max);
+    let final_tilt = rig.plant.pose()[2].to_degrees();
+    let checks = vec![
+        Check::at_most("largest rotation-centre error / box size", max_err, 0.01),
+        Check::at_most("final tilt (deg)", final_tilt.abs(), 1.0),
+    ];
+    let figure = Figure {
+        title: "fig5.9/5.10: rotating a box into a corner about its estimated rotation centre"
+            .into(),
+        x_label: "time (s)".into(),
+        log_x: false,
+        panels: vec![
+            Panel {
+                y_label: "rotation centre x (mm)".into(),
+                series: vec![
+                    series(
+                        "true",
+                        rig.trace.iter().map(|r| [r[0], r[1] * 1e3]).collect(),
+                    ),
+                    markers(
+                        "estimated (3 signed dithers)",
+                        estimates
+                            .iter()
+                            .map(|e| [e.t_s, e.estimate_m[0] * 1e3])
+                            .collect(),
+                    ),
+                    markers(
+                        "thesis form (RMS)",
+                        estimates
+                            .iter()
+                            .filter_map(|e| e.thesis_m.map(|p| [e.t_s, p[0] * 1e3]))
+                            .collect(),
+                    ),
+                ],
+            },
+            Panel {
+                y_label: "rotation centre y (mm)".into(),
+                series: vec![
+                    series(
+                        "true",
+                        rig.trace.iter().map(|r| [r[0], r[2] * 1e3]).collect(),
+                    ),
+                    markers(
+                        "estimated (3 signed dithers)",
+                        estimates
+                            .iter()
+                            .map(|e| [e.t_s, e.estimate_m[1] * 1e3])
+                            .collect(),
+                    ),
+                    markers(
+                        "thesis form (RMS)",
+                        estimates
+                            .iter()
+                            .filter_map(|e| e.thesis_m.map(|p| [e.t_s, p[1] * 1e3]))
+                            .collect(),
+                    ),
+                ],
+            },
+            Panel {
+                y_label: "error / box size (%)".into(),
+                series: vec![markers(
+                    "estimated",
+                    estimates
+                        .iter()
+                        .map(|e| [e.t_s, 100.0 * e.error_fraction])
+                        .collect(),
+                )],
+            },
+            Panel {
+                y_label: "box tilt (deg)".into(),
+                series: vec![series(
+                    "tilt",
+                    rig.trace
+                        .iter()
+                        .map(|r| [r[0], r[3].to_degrees()])
+                        .collect(),
+                )],
+            },
+        ],
+    };
+    Ok(Outcome {
+        simulated_s: rig.t,
+        summary: Fig59Summary {
+            size_m: params.size_m,
+            initial_tilt_deg: tilt0.to_degrees(),
+            final_tilt_deg: final_tilt,
+            dither_deg: amp.to_degrees(),
+            dither_hz: freq,
+            noise_n: sensor_params.noise_force_n,
+            max_error_fraction: max_err,
+            thesis_max_error_fraction: thesis_max,
+            estimates,
+        },
+        checks,
+        figure,
+    })
+}
