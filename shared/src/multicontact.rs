@@ -253,6 +253,15 @@ impl BoxPlant {
 /// P from the in-phase force responses per radian `g_i` of rotational dithers about centres
 /// `c_i` (at least three, not collinear): least squares of `g = A c + b`, then `P = −A⁻¹ b`.
 pub fn rotation_centre(centres: &[Vec2], responses: &[Vec2]) -> Option<Vec2> {
+    response_fit(centres, responses).map(|f| f.0)
+}
+
+/// [`rotation_centre`] with the fitted response matrix `A = ∂g/∂c = K J` (N/m per rad): under
+/// the thesis's diagonal stiffness (eqs. 5.19–5.20) its diagonal entries are zero.
+pub fn response_fit(
+    centres: &[Vec2],
+    responses: &[Vec2],
+) -> Option<(Vec2, nalgebra::Matrix2<f64>)> {
     let n = centres.len().min(responses.len());
     if n < 3 {
         return None;
@@ -275,7 +284,7 @@ pub fn rotation_centre(centres: &[Vec2], responses: &[Vec2]) -> Option<Vec2> {
     let a = nalgebra::Matrix2::new(x[0], x[1], x[2], x[3]);
     let b = Vec2::new(x[4], x[5]);
     let p = -(a.try_inverse()? * b);
-    (p.x.is_finite() && p.y.is_finite()).then_some(p)
+    (p.x.is_finite() && p.y.is_finite()).then_some((p, a))
 }
 
 /// The thesis's unsigned form (eqs. 5.21–5.30, diagonal stiffness): from the RMS force
@@ -344,6 +353,23 @@ pub fn friction_filter(f: Vec2, moment_r: f64, p_rel: Vec2) -> Option<(Vec2, Vec
     Some((fnorm, f - fnorm))
 }
 
+/// Eq. 5.29 with tan β where the thesis writes β: the two roots tan θ̄ of
+/// `r = tan θ̄ / tan(θ̄ + β)` (eq. 5.28), i.e. of `tan β · T² + (r − 1) T + r tan β = 0`.
+/// Their product is r: the second root is `cot(θ̄ + β) = tan(90° − β − θ̄)`, the mirror of the
+/// true θ̄ about 45° − β/2, so two dithers cannot tell them apart. `None` when the
+/// discriminant is negative (no θ̄ gives this r) or β = 0.
+pub fn eq_5_29_roots(r: f64, tan_beta: f64) -> Option<[f64; 2]> {
+    let disc = (r - 1.0).powi(2) - 4.0 * tan_beta * tan_beta * r;
+    if tan_beta == 0.0 || disc.is_nan() || disc < 0.0 {
+        return None;
+    }
+    let q = disc.sqrt();
+    Some([
+        ((1.0 - r) + q) / (2.0 * tan_beta),
+        ((1.0 - r) - q) / (2.0 * tan_beta),
+    ])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -405,6 +431,93 @@ mod tests {
                 "{n:?} {t:?}"
             );
         }
+    }
+
+    /// Eq. 5.29's roots: one is the true θ̄, the other its mirror 90° − β − θ̄; writing β for
+    /// tan β (as printed) moves the roots by O(β³).
+    #[test]
+    fn eq_5_29_has_the_true_angle_and_its_mirror() {
+        let beta = 8f64.to_radians();
+        for theta_deg in [10.0f64, 25.0, 55.0, 70.0] {
+            let th = theta_deg.to_radians();
+            let r = th.tan() / (th + beta).tan();
+            let roots = eq_5_29_roots(r, beta.tan()).unwrap();
+            let angles = roots.map(|t| t.atan().to_degrees());
+            let mirror = 90.0 - beta.to_degrees() - theta_deg;
+            let has = |a: f64| angles.iter().any(|x| (x - a).abs() < 1e-9);
+            assert!(has(theta_deg) && has(mirror), "{theta_deg}: {angles:?}");
+            assert!((roots[0] * roots[1] - r).abs() < 1e-12);
+            let printed = eq_5_29_roots(r, beta)
+                .unwrap()
+                .map(|t| t.atan().to_degrees());
+            let off = printed
+                .iter()
+                .map(|p| {
+                    angles
+                        .iter()
+                        .fold(f64::INFINITY, |m, a| m.min((p - a).abs()))
+                })
+                .fold(0.0f64, f64::max);
+            assert!(
+                off > 1e-4 && off < 0.5,
+                "{theta_deg}: printed form off by {off}°"
+            );
+        }
+    }
+
+    /// Eq. 5.17 derived: with F_Tx = p F_Ty − c (eq. 5.18, from M_s = F_N × P with R at the
+    /// origin) and F_T · F_N = 0, the true F_Ty satisfies
+    /// `F_Ty²(1 + p²) = F_Ty(2cp + p F_x + F_y) − (c² + c F_x)`; the printed M² in place of c²
+    /// does not hold.
+    #[test]
+    fn eq_5_17_has_c_squared_not_m_squared() {
+        let p_c = Vec2::new(0.02, 0.035);
+        let f_n = Vec2::new(1.5, 2.0);
+        let f_t = perp(f_n) * 0.3;
+        let f = f_n + f_t;
+        // Thesis order: A × B = A_x B_y − A_y B_x.
+        let m = f_n.x * p_c.y - f_n.y * p_c.x;
+        let p = p_c.x / p_c.y;
+        let c = m / p_c.y - f.x + p * f.y;
+        assert!((f_t.x - (p * f_t.y - c)).abs() < 1e-12, "eq. 5.18");
+        let lhs = f_t.y * f_t.y * (1.0 + p * p);
+        let rhs = |k: f64| f_t.y * (2.0 * c * p + p * f.x + f.y) - (k + c * f.x);
+        assert!((lhs - rhs(c * c)).abs() < 1e-12, "corrected eq. 5.17");
+        assert!((lhs - rhs(m * m)).abs() > 1e-3, "printed eq. 5.17");
+    }
+
+    /// The filter's assumption F_T ⊥ F_N, justified: a box rotating about P = (a, b) with a
+    /// floor contact at (a, 0) and a wall contact at (0, b), both sliding with the same μ, has
+    /// friction resultant μ·J·F_N, exactly perpendicular, and the filter recovers the split.
+    /// With unequal μ, or friction below μN (sticking), the assumption and the split fail.
+    #[test]
+    fn friction_is_perpendicular_to_the_normals_for_equal_sliding_friction() {
+        let (a, b) = (0.03, 0.05);
+        let (n_floor, n_wall) = (2.0, 1.2);
+        let split = |mu_floor: f64, mu_wall: f64, omega: f64| {
+            // Contact velocities ω J (c − P): floor (ω b, 0), wall (0, −ω a).
+            let v_floor = omega * b;
+            let v_wall = -omega * a;
+            let f_n = Vec2::new(n_wall, n_floor);
+            let f_t = Vec2::new(
+                -mu_floor * n_floor * v_floor.signum(),
+                -mu_wall * n_wall * v_wall.signum(),
+            );
+            (f_n, f_t)
+        };
+        let p_c = Vec2::new(a, b);
+        for omega in [1.0, -1.0] {
+            let (f_n, f_t) = split(0.4, 0.4, omega);
+            assert!(f_n.dot(&f_t).abs() < 1e-12);
+            // Moment about R = (0, 0): the normal forces act through P, friction through R.
+            let m_r = cross(p_c, f_n);
+            let (n, t) = friction_filter(f_n + f_t, m_r, p_c).unwrap();
+            assert!((n - f_n).norm() < 1e-12 && (t - f_t).norm() < 1e-12);
+        }
+        let (f_n, f_t) = split(0.4, 0.1, 1.0);
+        assert!(f_n.dot(&f_t).abs() > 0.1);
+        let (n, _) = friction_filter(f_n + f_t, cross(p_c, f_n), p_c).unwrap();
+        assert!((n - f_n).norm() > 0.05, "{n:?} vs {f_n:?}");
     }
 
     /// At rest in the corner with a preload the box's contacts are one floor and one wall

@@ -4,7 +4,7 @@
 use super::*;
 use crate::math::{Vec2, cross};
 use crate::multicontact::{
-    BoxParams, BoxPlant, Pose, friction_filter, rotation_centre, thesis_rotation_centre,
+    BoxParams, BoxPlant, Pose, friction_filter, response_fit, thesis_rotation_centre,
 };
 use crate::sensor::{SensorModel, SensorParams, Wrench};
 use serde::Serialize;
@@ -31,6 +31,11 @@ pub struct CentreEstimate {
     pub friction_estimated_n: Option<[f64; 2]>,
     /// The true mean friction resultant over the same window (N).
     pub friction_true_n: [f64; 2],
+    /// The fitted response matrix A = ∂g/∂c (rows: force x, y; N per m of centre shift per
+    /// rad). The thesis's diagonal stiffness (eqs. 5.19–5.20) makes it `[[0, −k_x], [k_y, 0]]`.
+    pub response_matrix: [[f64; 2]; 2],
+    /// |diagonal| / |off-diagonal| of A: 0 under the thesis's assumption.
+    pub coupling: f64,
 }
 
 /// Summary of `fig5.9`.
@@ -124,7 +129,9 @@ fn rotate_about(pose: Pose, centre: Vec2, angle: f64) -> Pose {
 /// Rotates the box, held by a compliant grip and pushed into a corner (floor and wall), from a
 /// 20° tilt into the corner in 2° steps about its estimated instantaneous centre of rotation;
 /// before each step the centre is re-estimated from three rotational dithers (0.5°, 2 Hz)
-/// about P̂, P̂ + 10 mm x̂ and P̂ + 10 mm ŷ. Sensor noise σ = 0.02 N.
+/// about P̂ and P̂ + 10 mm at ±45° (the thesis's unsigned form needs dither centres displaced
+/// in both x and y: a centre moved along x alone says nothing about P_y). Sensor noise
+/// σ = 0.02 N.
 pub fn fig5_9(opts: &Options) -> Result<Outcome<Fig59Summary>, String> {
     let params = BoxParams::default();
     let size = params.size_m[0].max(params.size_m[1]);
@@ -160,7 +167,12 @@ pub fn fig5_9(opts: &Options) -> Result<Outcome<Fig59Summary>, String> {
     while rig.target[2] > 0.2f64.to_radians() && steps < 30 {
         steps += 1;
         let base = rig.target;
-        let centres = [p_hat, p_hat + Vec2::new(m, 0.0), p_hat + Vec2::new(0.0, m)];
+        let diag = m * std::f64::consts::FRAC_1_SQRT_2;
+        let centres = [
+            p_hat,
+            p_hat + Vec2::new(diag, diag),
+            p_hat + Vec2::new(diag, -diag),
+        ];
         let mut responses = [Vec2::zeros(); 3];
         let mut rms = [[0.0; 2]; 3];
         let mut records: Vec<Vec<WrenchSample>> = Vec::new();
@@ -223,7 +235,7 @@ pub fn fig5_9(opts: &Options) -> Result<Outcome<Fig59Summary>, String> {
             responses[k] = raw[k];
             rms[k] = [raw[k].x.abs() * amp, raw[k].y.abs() * amp];
         }
-        let Some(est) = rotation_centre(&centres, &responses) else {
+        let Some((est, a_fit)) = response_fit(&centres, &responses) else {
             return Err("the rotation-centre estimate is singular".into());
         };
         let thesis = thesis_rotation_centre(centres[0], centres[1], centres[2], rms);
@@ -246,6 +258,11 @@ pub fn fig5_9(opts: &Options) -> Result<Outcome<Fig59Summary>, String> {
                 let ft = friction_sum / n_mean.max(1.0);
                 [ft.x, ft.y]
             },
+            response_matrix: [
+                [a_fit[(0, 0)], a_fit[(0, 1)]],
+                [a_fit[(1, 0)], a_fit[(1, 1)]],
+            ],
+            coupling: (a_fit[(0, 0)].hypot(a_fit[(1, 1)])) / (a_fit[(0, 1)].hypot(a_fit[(1, 0)])),
         });
         p_hat = est;
         // Rotate towards the corner about the estimate, smoothly over 0.5 s.

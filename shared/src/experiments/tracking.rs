@@ -26,11 +26,17 @@ pub struct TangentTrial {
     pub first: &'static str,
     /// The final answer: "estimate" or "failed".
     pub last: &'static str,
+    /// Why the estimator asked for a re-probe, if it did ("fold", "equal_responses", ...).
+    pub reprobe_reason: Option<String>,
     /// Final estimate's error (deg), if any.
     pub error_deg: Option<f64>,
     /// The thesis's eq. 5.8 on broadband RMS of the first two probes: its error (deg).
     pub thesis_error_deg: Option<f64>,
-    /// Rule used ("same_side", "along_probe", "least_squares").
+    /// Eq. 6.1 on broadband RMS with the measured strokes: its error (deg).
+    pub thesis_6_1_error_deg: Option<f64>,
+    /// The signed ratio of the responses to the commanded strokes (exact eq. 5.8): its error (deg).
+    pub ratio_error_deg: Option<f64>,
+    /// Rule used ("MotionRegression" or "CommandedRatio").
     pub method: Option<String>,
     /// Reported standard error (deg).
     pub std_error_deg: Option<f64>,
@@ -57,6 +63,10 @@ pub struct TangentCase {
     pub failures: usize,
     /// RMS error of the thesis's eq. 5.8 on broadband RMS (deg).
     pub thesis_rms_error_deg: f64,
+    /// RMS error of eq. 6.1 with the measured strokes (deg).
+    pub thesis_6_1_rms_error_deg: f64,
+    /// RMS error of the signed commanded-stroke ratio (deg).
+    pub ratio_rms_error_deg: f64,
     /// Trials.
     pub trials: Vec<TangentTrial>,
 }
@@ -110,12 +120,19 @@ fn trial(cfg: &SimConfig, alpha0_deg: f64, a_omega: f64) -> Result<TangentTrial,
     let (logs, duration) = estimate_once(&cfg, a_omega)?;
     let first = logs.first().ok_or("the estimation never finished")?;
     let last = logs.last().ok_or("the estimation never finished")?;
-    let thesis_error_deg = logs.iter().find_map(|l| match l.outcome {
-        TangentOutcome::Estimate(e) => e
-            .thesis_alpha0_rad
-            .map(|a| (a - (l.base_angle_rad - l.true_angle_rad)).to_degrees()),
-        _ => None,
-    });
+    // The thesis formulas answer α0 from the first two strokes; compare each with the true
+    // α0 = base − true angle.
+    let cross_check = |pick: fn(&crate::tangent::TangentEstimate) -> Option<f64>| {
+        logs.iter().find_map(|l| match l.outcome {
+            TangentOutcome::Estimate(e) => {
+                pick(&e).map(|a| (a - (l.base_angle_rad - l.true_angle_rad)).to_degrees())
+            }
+            _ => None,
+        })
+    };
+    let thesis_error_deg = cross_check(|e| e.thesis_alpha0_rad);
+    let thesis_6_1_error_deg = cross_check(|e| e.thesis_6_1_alpha0_rad);
+    let ratio_error_deg = cross_check(|e| e.ratio_alpha0_rad);
     let (error_deg, method, std_error_deg, failure) = match last.outcome {
         TangentOutcome::Estimate(e) => (
             Some((e.tangent_angle_rad - last.true_angle_rad).to_degrees()),
@@ -131,9 +148,15 @@ fn trial(cfg: &SimConfig, alpha0_deg: f64, a_omega: f64) -> Result<TangentTrial,
     Ok(TangentTrial {
         alpha0_deg,
         first: outcome_name(&first.outcome),
+        reprobe_reason: match first.outcome {
+            TangentOutcome::Reprobe { reason, .. } => Some(format!("{reason:?}")),
+            _ => None,
+        },
         last: outcome_name(&last.outcome),
         error_deg,
         thesis_error_deg,
+        thesis_6_1_error_deg,
+        ratio_error_deg,
         method,
         std_error_deg,
         failure,
@@ -173,7 +196,14 @@ pub fn tangent(opts: &Options) -> Result<Outcome<TangentSummary>, String> {
                 .filter_map(|t| t.error_deg)
                 .fold(0.0f64, |m, e| m.max(e.abs()))
         };
-        let thesis: Vec<f64> = trials.iter().filter_map(|t| t.thesis_error_deg).collect();
+        let rms =
+            |v: Vec<f64>| (v.iter().map(|e| e * e).sum::<f64>() / v.len().max(1) as f64).sqrt();
+        let thesis_rms = rms(trials.iter().filter_map(|t| t.thesis_error_deg).collect());
+        let thesis_61 = rms(trials
+            .iter()
+            .filter_map(|t| t.thesis_6_1_error_deg)
+            .collect());
+        let ratio = rms(trials.iter().filter_map(|t| t.ratio_error_deg).collect());
         cases.push(TangentCase {
             case: name.into(),
             max_error_within_10_deg: errs(10.0),
@@ -184,9 +214,9 @@ pub fn tangent(opts: &Options) -> Result<Outcome<TangentSummary>, String> {
                 .count(),
             reprobes: trials.iter().filter(|t| t.first == "reprobe").count(),
             failures: trials.iter().filter(|t| t.last == "failed").count(),
-            thesis_rms_error_deg: (thesis.iter().map(|e| e * e).sum::<f64>()
-                / thesis.len().max(1) as f64)
-                .sqrt(),
+            thesis_rms_error_deg: thesis_rms,
+            thesis_6_1_rms_error_deg: thesis_61,
+            ratio_rms_error_deg: ratio,
             trials,
         });
     }
@@ -756,7 +786,7 @@ pub(crate) fn run_correlation(
     velocity: f64,
     u_end: f64,
     a_omega: f64,
-) -> Result<TrackingRun, String> {
+) -> Result<(TrackingRun, Vec<f64>), String> {
     let preload = cfg.servo.hybrid.preload_n;
     let mut sim = Lockstep::new(cfg)?;
     let dt = sim.dt();
@@ -834,7 +864,7 @@ pub(crate) fn run_correlation(
             break;
         }
     }
-    Ok(TrackingRun {
+    let run = TrackingRun {
         tangent_error_rms_deg: (sq / n.max(1.0)).sqrt(),
         tangent_error_max_deg: max_err,
         worst_normal_deviation: worst,
@@ -848,7 +878,8 @@ pub(crate) fn run_correlation(
         duration_s: sim.time(),
         estimates: Vec::new(),
         samples,
-    })
+    };
+    Ok((run, tracker.weights().to_vec()))
 }
 
 /// Summary of `fig5.3`.
@@ -904,7 +935,7 @@ pub fn fig5_3(opts: &Options) -> Result<Outcome<Fig53Summary>, String> {
             .unwrap_or_else(Vector3::zeros)
     };
     let initial: Vec<f64> = fit.iter().map(|w| 1.1 * w).collect();
-    let preliminary = run_correlation(&cfg, params, &initial, v, end, 5.0 * v)?;
+    let (preliminary, final_weights) = run_correlation(&cfg, params, &initial, v, end, 5.0 * v)?;
     let dither = run_tracking(&cfg, v, end, 5.0 * v, 600.0)?;
     let checks = vec![
         Check::at_most(
@@ -924,7 +955,7 @@ pub fn fig5_3(opts: &Options) -> Result<Outcome<Fig53Summary>, String> {
         summary: Fig53Summary {
             vertices,
             initial_weights_m: initial,
-            final_weights_m: Vec::new(),
+            final_weights_m: final_weights,
             preliminary,
             dither,
         },
