@@ -259,7 +259,8 @@ pub struct ProbeStats {
     pub quadrature_n: f64,
     /// Thesis eq. 5.6: the RMS of F_N − F̄_N over whole periods at the stroke frequency,
     /// in-phase and quadrature together and unsigned, with noise, drift and harmonics removed:
-    /// `√((a² + b²)/2)` for the fitted `a sin φ + b cos φ` (N).
+    /// `√((a² + b²)/2 − 2σ_R²)` for the fitted `a sin φ + b cos φ`, σ_R the measured standard
+    /// error of `r_signed_n` (N).
     pub rms_n: f64,
     /// Stroke amplitude actually travelled along the probe direction (m, fundamental).
     pub stroke_m: f64,
@@ -447,7 +448,8 @@ pub fn probe_stats(
         r_signed_n: -c[3] / 2f64.sqrt(),
         r_std_n: (var_i / 2.0).sqrt(),
         quadrature_n: c[4].abs() / 2f64.sqrt(),
-        rms_n: ((c[3] * c[3] + c[4] * c[4]) / 2.0).sqrt(),
+        // E[(a² + b²)/2] = true + (var a + var b)/2 = true + 2 var R: remove the noise.
+        rms_n: ((c[3] * c[3] + c[4] * c[4]) / 2.0 - var_i).max(0.0).sqrt(),
         stroke_m: stroke,
         stroke_sides_m: [hi, -lo],
         displacement_m: displacement,
