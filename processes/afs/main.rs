@@ -5,11 +5,20 @@
 //! ```
 
 use afs::experiment;
+use afs::supervisor;
 use afs_shared::experiments::{NAMES, Options};
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;
+
+/// `println!` that ignores a closed stdout (e.g. `afs messages | head`) instead of panicking.
+macro_rules! say {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout().lock(), $($arg)*);
+    }};
+}
 
 /// Active force sensing (Ipri 1995): force-guided assembly with tuned dither.
 #[derive(Parser)]
@@ -44,6 +53,65 @@ enum Command {
         /// experiment's own settings apply on top.
         #[arg(long)]
         config: Option<PathBuf>,
+    },
+    /// Print the byte layout of every message exchanged over iceoryx2 (docs/messages.md).
+    Messages,
+    /// Launch the process graph (servo, sensor, estimator) and run a scenario in real time.
+    ///
+    /// Ends with a summary (one JSON object with --json): the scenario's figures, the same
+    /// scenario's lockstep reference and their agreement, the servo loop's statistics.
+    /// Exits with status 1 if a check fails, 2 on an error; Ctrl-C stops the stack in order.
+    Run {
+        /// Stack file (processes, priorities, CPUs, restart policy, prefix); default: the
+        /// built-in one (examples/stack.toml).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// surface-tracking, corner, friction-suppression or friction-id.
+        #[arg(long)]
+        scenario: Option<String>,
+        /// Simulated seconds (0: the scenario's own length).
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Stack prefix (isolates the shared memory of concurrent stacks).
+        #[arg(long)]
+        prefix: Option<String>,
+        /// Seed of the sensor noise.
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Record every topic to this MCAP file (Foxglove opens it).
+        #[arg(long)]
+        record: Option<PathBuf>,
+        /// Print the summary as one JSON object.
+        #[arg(long)]
+        json: bool,
+        /// No progress line on stderr.
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// Show a running stack's processes, health and loop statistics.
+    Status {
+        /// Stack prefix.
+        #[arg(long, default_value = "afs")]
+        prefix: String,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Draw the force, position and dither histories of a recording (SVG).
+    Plot {
+        /// The MCAP file from `afs run --record`.
+        file: PathBuf,
+        /// Output SVG (default: next to the recording).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Export a recording as one CSV file per topic.
+    Export {
+        /// The MCAP file from `afs run --record`.
+        file: PathBuf,
+        /// Directory for the CSV files.
+        #[arg(long, default_value = "out/csv")]
+        out: PathBuf,
     },
 }
 
@@ -98,7 +166,7 @@ fn run() -> Result<ExitCode> {
                 } else {
                     serde_json::Value::Array(reports)
                 };
-                println!("{}", serde_json::to_string_pretty(&v)?);
+                say!("{}", serde_json::to_string_pretty(&v)?);
             }
             Ok(if all_passed {
                 ExitCode::SUCCESS
@@ -106,11 +174,76 @@ fn run() -> Result<ExitCode> {
                 ExitCode::from(1)
             })
         }
+        Command::Run {
+            config,
+            scenario,
+            duration,
+            prefix,
+            seed,
+            record,
+            json,
+            quiet,
+        } => {
+            if let Some(d) = duration
+                && !(d.is_finite() && d >= 0.0)
+            {
+                anyhow::bail!("--duration {d} must be a number of seconds ≥ 0");
+            }
+            let stop = afs::board::stop_flag()?;
+            let opts = supervisor::RunOptions {
+                config,
+                scenario,
+                duration,
+                prefix,
+                seed,
+                record,
+                progress: !quiet,
+            };
+            let outcome = supervisor::run(&opts, &stop)?;
+            if json {
+                say!("{}", serde_json::to_string_pretty(&outcome.report)?);
+            } else {
+                print_run(&outcome.report);
+            }
+            Ok(if outcome.passed {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::from(1)
+            })
+        }
+        Command::Status { prefix, json } => {
+            let v = supervisor::status(&prefix, std::time::Duration::from_secs(2))?;
+            if json {
+                say!("{}", serde_json::to_string_pretty(&v)?);
+            } else {
+                print_status(&v);
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Plot { file, out } => {
+            let fig = afs::record::figure(&file)?;
+            let out = out.unwrap_or_else(|| file.with_extension("svg"));
+            afs::plot::render(&fig, &out)?;
+            say!("wrote {}", out.display());
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Export { file, out } => {
+            for f in afs::record::export_csv(&file, &out)? {
+                say!("wrote {}", f.display());
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Messages => {
+            for l in afs_shared::msg::layouts() {
+                say!("{}", l.markdown());
+            }
+            Ok(ExitCode::SUCCESS)
+        }
     }
 }
 
 fn print_human(r: &serde_json::Value) {
-    println!(
+    say!(
         "{}: {} (plot {}, {:.1} s simulated in {:.2} s CPU)",
         r["experiment"].as_str().unwrap_or("?"),
         if r["passed"].as_bool() == Some(true) {
@@ -124,7 +257,7 @@ fn print_human(r: &serde_json::Value) {
     );
     if let Some(checks) = r["checks"].as_array() {
         for c in checks {
-            println!(
+            say!(
                 "  [{}] {}: {:.4} {} {}",
                 if c["pass"].as_bool() == Some(true) {
                     "ok"
@@ -137,5 +270,121 @@ fn print_human(r: &serde_json::Value) {
                 c["limit"].as_f64().unwrap_or(f64::NAN),
             );
         }
+    }
+}
+
+fn print_run(r: &serde_json::Value) {
+    let f = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
+    say!(
+        "{} on prefix '{}': {} ({:.1} s simulated in {:.1} s)",
+        r["scenario"].as_str().unwrap_or("?"),
+        r["prefix"].as_str().unwrap_or("?"),
+        if r["passed"].as_bool() == Some(true) {
+            "PASS"
+        } else {
+            "FAIL"
+        },
+        f(&r["stack"]["duration_s"]),
+        f(&r["wall_s"]),
+    );
+    let t = &r["stack"]["tracking"];
+    let rt = &r["reference"]["tracking"];
+    say!(
+        "  tangent error RMS {:.3}° (lockstep {:.3}°), force deviation RMS {:.3} (lockstep {:.3}), travelled {:.1} mm, estimates {}",
+        f(&t["tangent_error_rms_deg"]),
+        f(&rt["tangent_error_rms_deg"]),
+        f(&t["normal_deviation_rms"]),
+        f(&rt["normal_deviation_rms"]),
+        f(&t["travelled_m"]) * 1e3,
+        t["estimations"]["estimates"]
+    );
+    if let Some(fr) = r["stack"]["friction"].as_object() {
+        say!(
+            "  friction {:.3} N before tuning, {:.1} % of it at the end, Aω {:.1} mm/s",
+            fr["start_mean_n"].as_f64().unwrap_or(f64::NAN),
+            100.0 * fr["end_ratio"].as_f64().unwrap_or(f64::NAN),
+            1e3 * fr["settled_a_omega_m_per_s"].as_f64().unwrap_or(f64::NAN)
+        );
+    }
+    let l = &r["loop"];
+    if l.is_object() {
+        say!(
+            "  servo: {} ticks, {} misses; wake jitter p50/p99/p99.9/max {:.1}/{:.1}/{:.1}/{:.1} µs; force age p50/p99/p99.9 {:.0}/{:.0}/{:.0} µs; SCHED_FIFO {}",
+            l["ticks"],
+            l["misses"],
+            f(&l["wake_jitter_us"]["p50"]),
+            f(&l["wake_jitter_us"]["p99"]),
+            f(&l["wake_jitter_us"]["p99_9"]),
+            f(&l["wake_jitter_us"]["max"]),
+            f(&l["force_age_us"]["p50"]),
+            f(&l["force_age_us"]["p99"]),
+            f(&l["force_age_us"]["p99_9"]),
+            l["sched_fifo"]
+        );
+    }
+    if let Some(p) = r["processes"].as_array() {
+        for x in p {
+            say!(
+                "  {}: {} restarts{}",
+                x["name"].as_str().unwrap_or("?"),
+                x["restarts"],
+                if x["gave_up"].as_bool() == Some(true) {
+                    ", gave up"
+                } else {
+                    ""
+                }
+            );
+        }
+    }
+    if let Some(checks) = r["checks"].as_array() {
+        for c in checks {
+            say!(
+                "  [{}] {}: {} {} {}",
+                if c["pass"].as_bool() == Some(true) {
+                    "ok"
+                } else {
+                    "FAIL"
+                },
+                c["name"].as_str().unwrap_or(""),
+                c["value"],
+                c["relation"].as_str().unwrap_or(""),
+                c["limit"]
+            );
+        }
+    }
+}
+
+fn print_status(v: &serde_json::Value) {
+    say!("stack '{}'", v["prefix"].as_str().unwrap_or("?"));
+    if let Some(s) = v["supervisor"].as_object() {
+        say!(
+            "  supervisor pid {}: {} at {:.1}/{:.1} s",
+            s["pid"],
+            s["scenario"].as_str().unwrap_or("?"),
+            s["elapsed_s"].as_f64().unwrap_or(0.0),
+            s["duration_s"].as_f64().unwrap_or(0.0)
+        );
+    }
+    if let Some(ps) = v["processes"].as_array() {
+        for p in ps {
+            say!(
+                "  {:<10} pid {:<7} {:<10} restarts {}",
+                p["name"].as_str().unwrap_or("?"),
+                p["pid"],
+                p["state"].as_str().unwrap_or("?"),
+                p["restarts"]
+            );
+        }
+    }
+    let l = &v["loop"];
+    if l.is_object() {
+        say!(
+            "  servo loop: {} ticks, {} misses, wake jitter p99 {:.1} µs, force age p99 {:.0} µs, safe entries {}",
+            l["ticks"],
+            l["misses"],
+            l["wake_jitter_us"]["p99"].as_f64().unwrap_or(f64::NAN),
+            l["force_age_us"]["p99"].as_f64().unwrap_or(f64::NAN),
+            l["safe_entries"]
+        );
     }
 }

@@ -272,6 +272,15 @@ impl HybridController {
         }
     }
 
+    /// Makes a set-point offset (e.g. an interrupted probe stroke) part of the nominal
+    /// set-point, so that dropping the offset leaves the command where it was.
+    pub fn absorb_offset(&mut self, offset: Vec2) {
+        if offset.x.is_finite() && offset.y.is_finite() {
+            self.s += offset.dot(&self.frame.tangent());
+            self.depth -= offset.dot(&self.frame.normal());
+        }
+    }
+
     /// Moves the normal set-point by `delta` (m, + into the surface), e.g. to back off.
     pub fn shift_depth(&mut self, delta: f64) {
         if delta.is_finite() {

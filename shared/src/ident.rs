@@ -238,3 +238,215 @@ mod tests {
         assert!(fit.rms_force_residual_n < 1e-15);
     }
 }
+
+/// On-line friction identification from the servo's stream (the estimator board runs it on
+/// every [`ServoSample`](crate::msg::ServoSample)).
+///
+/// It collects windows of steady, undithered sliding: the servo tracking at its requested
+/// velocity with no dither, for at least `settle_s` since the velocity was reached, cut into
+/// windows of `window_s`. Each window gives a friction coefficient μ = mean friction / mean
+/// normal force (fig. 4.6) and a point (speed, friction at the reference normal force) for
+/// eq. 4.5; once the speeds span 20× the law is fitted with [`fit_friction_law`].
+#[derive(Debug, Clone)]
+pub struct OnlineFrictionId {
+    settle_s: f64,
+    window_s: f64,
+    steady_since: Option<f64>,
+    target: f64,
+    acc: WindowAcc,
+    points: Vec<(f64, f64)>,
+    mus: Vec<(f64, f64)>,
+    max_points: usize,
+    fit: Option<FrictionFit>,
+    last_mu: Option<(f64, f64)>,
+}
+
+#[derive(Debug, Clone, Copy, Default)]
+struct WindowAcc {
+    t0: f64,
+    n: f64,
+    friction: f64,
+    normalized: f64,
+    normal: f64,
+    speed: f64,
+}
+
+/// One tick of the servo's stream, as the identification needs it.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct IdentTick {
+    /// Time (s).
+    pub t: f64,
+    /// Requested velocity (m/s).
+    pub velocity_target: f64,
+    /// Nominal velocity (m/s).
+    pub nominal_velocity: f64,
+    /// Commanded Aω (m/s).
+    pub a_omega: f64,
+    /// Measured tangential force along t̂ (N).
+    pub tangential_force: f64,
+    /// Friction normalised to the reference normal force (N).
+    pub friction_normalized: f64,
+    /// Measured normal force (N).
+    pub normal_force: f64,
+    /// Measured tip velocity along t̂ (m/s).
+    pub tangent_velocity: f64,
+    /// Tracking with good force data.
+    pub tracking: bool,
+}
+
+/// What the identification holds.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct OnlineIdent {
+    /// Windows used.
+    pub windows: usize,
+    /// Distinct speed levels (1 % apart).
+    pub speeds: usize,
+    /// μ of the latest speed level: mean and spread over its windows.
+    pub mu: Option<(f64, f64)>,
+    /// The eq. 4.5 fit, once the speeds span enough.
+    pub fit: Option<FrictionFit>,
+}
+
+impl OnlineFrictionId {
+    /// Windows of `window_s` after `settle_s` of steady motion; keeps at most `max_points`.
+    pub fn new(settle_s: f64, window_s: f64, max_points: usize) -> Self {
+        Self {
+            settle_s,
+            window_s,
+            steady_since: None,
+            target: 0.0,
+            acc: WindowAcc::default(),
+            points: Vec::with_capacity(max_points),
+            mus: Vec::with_capacity(max_points),
+            max_points,
+            fit: None,
+            last_mu: None,
+        }
+    }
+
+    /// One tick.
+    pub fn push(&mut self, k: &IdentTick) {
+        let values = [
+            k.t,
+            k.velocity_target,
+            k.nominal_velocity,
+            k.a_omega,
+            k.tangential_force,
+            k.friction_normalized,
+            k.normal_force,
+            k.tangent_velocity,
+        ];
+        let steady = k.tracking
+            && values.iter().all(|v| v.is_finite())
+            && k.velocity_target != 0.0
+            && (k.nominal_velocity - k.velocity_target).abs() < 1e-9
+            && k.a_omega < 1e-6
+            && k.normal_force > 0.0;
+        if !steady || k.velocity_target != self.target {
+            self.steady_since = steady.then_some(k.t);
+            self.target = k.velocity_target;
+            self.acc = WindowAcc::default();
+            return;
+        }
+        let since = *self.steady_since.get_or_insert(k.t);
+        if k.t - since < self.settle_s {
+            return;
+        }
+        let dir = k.velocity_target.signum();
+        if self.acc.n == 0.0 {
+            self.acc.t0 = k.t;
+        }
+        self.acc.n += 1.0;
+        self.acc.friction += -k.tangential_force * dir;
+        self.acc.normalized += k.friction_normalized;
+        self.acc.normal += k.normal_force;
+        self.acc.speed += k.tangent_velocity * dir;
+        if k.t - self.acc.t0 >= self.window_s {
+            let a = self.acc;
+            self.acc = WindowAcc::default();
+            if self.points.len() < self.max_points && a.normal > 0.0 && a.speed > 0.0 {
+                let speed = k.velocity_target.abs();
+                self.points.push((speed, a.normalized / a.n));
+                self.mus.push((speed, a.friction / a.normal));
+                self.update(speed);
+            }
+        }
+    }
+
+    fn update(&mut self, speed: f64) {
+        let same: Vec<f64> = self
+            .mus
+            .iter()
+            .filter(|(s, _)| (s - speed).abs() <= 0.01 * speed)
+            .map(|m| m.1)
+            .collect();
+        let n = same.len() as f64;
+        let mean = same.iter().sum::<f64>() / n;
+        let var = same.iter().map(|m| (m - mean).powi(2)).sum::<f64>() / n;
+        self.last_mu = Some((mean, var.sqrt()));
+        self.fit = fit_friction_law(&self.points).ok();
+    }
+
+    /// The state of the identification.
+    pub fn report(&self) -> OnlineIdent {
+        let mut levels: Vec<f64> = Vec::new();
+        for (s, _) in &self.points {
+            if !levels.iter().any(|l| (l - s).abs() <= 0.01 * s) {
+                levels.push(*s);
+            }
+        }
+        OnlineIdent {
+            windows: self.points.len(),
+            speeds: levels.len(),
+            mu: self.last_mu,
+            fit: self.fit,
+        }
+    }
+}
+
+#[cfg(test)]
+mod online_tests {
+    use super::*;
+
+    /// Steady windows of an exact eq. 4.5 law at six speeds identify it; dithered, unsteady or
+    /// invalid ticks are ignored.
+    #[test]
+    fn identifies_the_law_from_steady_windows() {
+        let law = FrictionLaw::THESIS;
+        let mut id = OnlineFrictionId::new(0.2, 0.25, 1000);
+        let dt = 1e-3;
+        let mut t = 0.0;
+        for v in [0.002, 0.004, 0.008, 0.016, 0.032, 0.048] {
+            for dir in [1.0, -1.0] {
+                for k in 0..1200 {
+                    let f = law.resistance(v);
+                    let normal = 2.5;
+                    let dithered = k < 100;
+                    id.push(&IdentTick {
+                        t,
+                        velocity_target: dir * v,
+                        nominal_velocity: dir * v,
+                        a_omega: if dithered { 0.01 } else { 0.0 },
+                        tangential_force: -dir * f * normal / 2.5,
+                        friction_normalized: f,
+                        normal_force: normal,
+                        tangent_velocity: dir * v,
+                        tracking: true,
+                    });
+                    t += dt;
+                }
+            }
+        }
+        let r = id.report();
+        assert_eq!(r.speeds, 6);
+        assert!(r.windows >= 36, "{}", r.windows);
+        let (mu, spread) = r.mu.unwrap();
+        assert!((mu - law.resistance(0.048) / 2.5).abs() < 1e-9 && spread < 1e-9);
+        let fit = r.fit.unwrap().law;
+        assert!(
+            (fit.kinetic_n - law.kinetic_n).abs() < 1e-6 * law.kinetic_n,
+            "{fit:?}"
+        );
+        assert!((fit.stribeck_n - law.stribeck_n).abs() < 1e-5, "{fit:?}");
+    }
+}

@@ -287,6 +287,69 @@ pub fn response_fit(
     (p.x.is_finite() && p.y.is_finite()).then_some((p, a))
 }
 
+/// A rotation-centre estimate from raw dither records.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RotationEstimate {
+    /// P from the signed responses (m).
+    pub centre: Vec2,
+    /// The thesis's unsigned form on the first three dithers, if it found a centre (m).
+    pub thesis_centre: Option<Vec2>,
+    /// Fitted response matrix A = ∂g/∂c.
+    pub response_matrix: nalgebra::Matrix2<f64>,
+    /// |diagonal| / |off-diagonal| of A.
+    pub coupling: f64,
+    /// In-phase force response per radian of each dither (N/rad).
+    pub responses: Vec<Vec2>,
+}
+
+/// Estimates P from rotational dithers about `centres`: `samples` are (dither index, time s,
+/// dither phase rad, measured force N), the commanded rotation about centre i being
+/// `amplitude sin φ`. A superposed suppression dither at `suppression_hz` (0: none) is removed
+/// by a one-period comb before the lock-in. `None` with fewer than three usable dithers or a
+/// singular fit.
+pub fn estimate_rotation_centre(
+    centres: &[Vec2],
+    samples: &[(usize, f64, f64, Vec2)],
+    amplitude: f64,
+    suppression_hz: f64,
+) -> Option<RotationEstimate> {
+    if centres.len() < 3 || !(amplitude.is_finite() && amplitude > 0.0) {
+        return None;
+    }
+    let mut responses = Vec::with_capacity(centres.len());
+    for k in 0..centres.len() {
+        let mine: Vec<&(usize, f64, f64, Vec2)> = samples.iter().filter(|s| s.0 == k).collect();
+        let comp = |sel: fn(&Vec2) -> f64| -> Option<f64> {
+            let d: Vec<(f64, f64, f64)> = mine.iter().map(|s| (s.1, s.2, sel(&s.3))).collect();
+            if d.len() < 16 {
+                return None;
+            }
+            crate::tangent::in_phase_amplitude(&d, suppression_hz)
+        };
+        let g = Vec2::new(comp(|f| f.x)?, comp(|f| f.y)?) / amplitude;
+        if !(g.x.is_finite() && g.y.is_finite()) {
+            return None;
+        }
+        responses.push(g);
+    }
+    let (centre, a) = response_fit(centres, &responses)?;
+    let rms = [0, 1, 2].map(|k| {
+        [
+            responses[k].x.abs() * amplitude,
+            responses[k].y.abs() * amplitude,
+        ]
+    });
+    let thesis_centre = thesis_rotation_centre(centres[0], centres[1], centres[2], rms);
+    let coupling = a[(0, 0)].hypot(a[(1, 1)]) / a[(0, 1)].hypot(a[(1, 0)]);
+    Some(RotationEstimate {
+        centre,
+        thesis_centre,
+        response_matrix: a,
+        coupling,
+        responses,
+    })
+}
+
 /// The thesis's unsigned form (eqs. 5.21–5.30, diagonal stiffness): from the RMS force
 /// responses (x, y components) of dithers about `c0`, `c1 = c0 + m u` and `c2`, return the
 /// centre among the four sign choices of `(P − c0)_y = m u_y / (1 ∓ r_x)`,

@@ -55,6 +55,72 @@ pub struct ServoParams {
     pub tangent: TangentParams,
     /// When to start a tangent estimation on its own (thesis §5.3.2).
     pub tracking: TrackingParams,
+    /// What to do while the force data cannot be trusted.
+    pub safe: SafeParams,
+}
+
+/// The safe state, entered whenever the force data cannot be trusted (stale, missing or
+/// insane): the tangential velocity ramps to zero at the controller's acceleration limit, the
+/// dither decays to nothing within a few tens of milliseconds, the force loop freezes and the normal set-point backs off by a fraction of the
+/// preload's penetration, so the normal force can only fall below the preload, never rise.
+/// Once fresh data has been good for `recovery_s` the force loop restores the preload, and
+/// motion and dither resume when the force has settled.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SafeParams {
+    /// Back-off along the normal, as a fraction of the preload penetration F_d/k̂.
+    pub backoff_fraction: f64,
+    /// Time over which the back-off is applied (s).
+    pub backoff_s: f64,
+    /// Time constant of the dither's decay (s).
+    pub dither_decay_s: f64,
+    /// Good data needed before leaving the safe state (s).
+    pub recovery_s: f64,
+}
+
+impl Default for SafeParams {
+    fn default() -> Self {
+        Self {
+            backoff_fraction: 0.3,
+            backoff_s: 0.01,
+            dither_decay_s: 0.02,
+            recovery_s: 0.02,
+        }
+    }
+}
+
+impl SafeParams {
+    /// Checks the settings.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(self.backoff_fraction.is_finite() && (0.0..=1.0).contains(&self.backoff_fraction)) {
+            return Err(format!(
+                "servo.safe.backoff_fraction = {} must lie in [0, 1]",
+                self.backoff_fraction
+            ));
+        }
+        for (n, v) in [
+            ("backoff_s", self.backoff_s),
+            ("dither_decay_s", self.dither_decay_s),
+            ("recovery_s", self.recovery_s),
+        ] {
+            if !(v.is_finite() && v > 0.0 && v <= 10.0) {
+                return Err(format!("servo.safe.{n} = {v} must lie in (0, 10] s"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Where the safe state is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct SafeState {
+    /// Velocity and Aω to restore.
+    resume_velocity: f64,
+    resume_a_omega: f64,
+    /// Back-off still to apply (m).
+    backoff_left: f64,
+    /// Time the data has been good again (s).
+    good_for_s: f64,
 }
 
 /// Limits on the force feedback that start a tangent estimation (thesis §5.3.2: "a sudden
@@ -167,6 +233,10 @@ pub struct EstimationCounters {
     pub force_triggers: usize,
     /// Started by the set-point drift.
     pub slope_triggers: usize,
+    /// Estimations abandoned because the force data was lost mid-probe.
+    pub aborted: usize,
+    /// Entries into the safe state.
+    pub safe_entries: usize,
 }
 
 impl Default for ServoParams {
@@ -186,6 +256,7 @@ impl Default for ServoParams {
             preload_feedforward: true,
             tangent: TangentParams::default(),
             tracking: TrackingParams::default(),
+            safe: SafeParams::default(),
         }
     }
 }
@@ -224,6 +295,7 @@ impl ServoParams {
         }
         self.hybrid.validate()?;
         self.dither.validate()?;
+        self.safe.validate()?;
         self.tuner.validate()?;
         self.friction_model
             .validate()
@@ -291,6 +363,10 @@ pub struct ServoDiag {
     pub mode: ServoMode,
     /// Estimated tangent angle in use (rad).
     pub tangent_angle_rad: f64,
+    /// Requested nominal velocity (m/s).
+    pub velocity_target_m_per_s: f64,
+    /// In the safe state.
+    pub safe: bool,
 }
 
 /// The fast loop.
@@ -335,6 +411,12 @@ pub struct ServoCore {
     settled_s: f64,
     /// Normal force over the last dither period (moving average, allocated once).
     normal_window: crate::window::SlidingWindow,
+    /// The safe state, while in it.
+    safe: Option<SafeState>,
+    /// Aω to restore when `Resuming` ends (after the safe state).
+    resume_a_omega: Option<f64>,
+    /// The probe stroke commanded last tick (to absorb it if the probe is abandoned).
+    last_stroke: SetpointOffset,
 }
 
 /// Probe samples are recorded every this many servo ticks (1 kHz at 10 kHz).
@@ -441,6 +523,9 @@ impl ServoCore {
                     .round()
                     .max(1.0) as usize,
             ),
+            safe: None,
+            resume_a_omega: None,
+            last_stroke: SetpointOffset::default(),
         })
     }
 
@@ -626,6 +711,15 @@ impl ServoCore {
         }
     }
 
+    /// Gives up waiting for the estimator (it did not answer): keeps the old tangent, counts a
+    /// failure and resumes tracking.
+    pub fn give_up_estimate(&mut self) {
+        if self.mode == ServoMode::AwaitingEstimate {
+            self.counters.failures += 1;
+            self.resume();
+        }
+    }
+
     fn plan_with_dither(&self, mut plan: ProbePlan) -> ProbePlan {
         plan.dither_hz = if self.dither.amplitude() > 0.0 {
             self.params.dither.frequency_hz
@@ -654,6 +748,110 @@ impl ServoCore {
             self.settled_s = 0.0;
         }
         self.settled_s >= self.params.tangent.settle_s || self.stopped_s > 3.0
+    }
+
+    /// The velocity target the servo tracks at, or goes back to after an estimation or the
+    /// safe state (m/s).
+    pub fn resume_velocity(&self) -> f64 {
+        match (&self.safe, self.mode) {
+            (Some(s), _) => s.resume_velocity,
+            (None, ServoMode::Track) => self.hybrid.velocity_target(),
+            (None, _) => self.resume_velocity,
+        }
+    }
+
+    /// The Aω the servo dithers at, or goes back to after the safe state (m/s).
+    pub fn resume_a_omega(&self) -> f64 {
+        match &self.safe {
+            Some(s) => s.resume_a_omega,
+            None => self
+                .resume_a_omega
+                .unwrap_or(self.dither.velocity_amplitude()),
+        }
+    }
+
+    /// True while in the safe state.
+    pub fn is_safe(&self) -> bool {
+        self.safe.is_some()
+    }
+
+    /// Enters, runs or leaves the safe state for this tick's force-data validity.
+    fn update_safe(&mut self, valid: bool, dt: f64) {
+        let recovery = self.params.safe.recovery_s;
+        match self.safe.as_mut() {
+            None if !valid => self.enter_safe(),
+            None => return,
+            Some(s) if valid => {
+                s.good_for_s += dt;
+                if s.good_for_s >= recovery {
+                    self.leave_safe();
+                    return;
+                }
+            }
+            Some(s) => s.good_for_s = 0.0,
+        }
+        let p = self.params.safe;
+        let total =
+            p.backoff_fraction * self.hybrid.params().preload_n / self.hybrid.hooke_stiffness();
+        let a = self.dither.velocity_amplitude();
+        let decayed = a * (-dt / p.dither_decay_s).exp();
+        self.dither.set_velocity_amplitude(
+            if decayed < 1e-6 { 0.0 } else { decayed },
+            self.amplitude_bound,
+        );
+        if let Some(s) = self.safe.as_mut() {
+            let step = s.backoff_left.min(total * dt / p.backoff_s);
+            s.backoff_left -= step;
+            self.hybrid.shift_depth(-step);
+        }
+    }
+
+    fn enter_safe(&mut self) {
+        self.counters.safe_entries += 1;
+        let resume_velocity = match self.mode {
+            ServoMode::Track => self.hybrid.velocity_target(),
+            _ => self.resume_velocity,
+        };
+        let resume_a_omega = self
+            .resume_a_omega
+            .unwrap_or(self.dither.velocity_amplitude());
+        self.hybrid.set_velocity(0.0);
+        if matches!(self.mode, ServoMode::Stopping | ServoMode::Probing) {
+            // The strokes cannot be measured without force data: abandon them, keeping the
+            // set-point where the stroke had taken it.
+            self.counters.aborted += 1;
+            if self.mode == ServoMode::Probing {
+                self.hybrid.absorb_offset(self.last_stroke.displacement);
+            }
+            self.probe.reset();
+            self.reprobe = false;
+        }
+        if self.mode != ServoMode::AwaitingEstimate {
+            self.mode = ServoMode::Resuming;
+        }
+        self.last_stroke = SetpointOffset::default();
+        self.resume_velocity = resume_velocity;
+        let p = self.params.safe;
+        self.safe = Some(SafeState {
+            resume_velocity,
+            resume_a_omega,
+            backoff_left: p.backoff_fraction * self.hybrid.params().preload_n
+                / self.hybrid.hooke_stiffness(),
+            good_for_s: 0.0,
+        });
+    }
+
+    fn leave_safe(&mut self) {
+        let Some(s) = self.safe.take() else {
+            return;
+        };
+        self.resume_velocity = s.resume_velocity;
+        self.resume_a_omega = Some(s.resume_a_omega);
+        self.stopped_s = 0.0;
+        self.settled_s = 0.0;
+        if self.mode != ServoMode::AwaitingEstimate {
+            self.mode = ServoMode::Resuming;
+        }
     }
 
     fn check_triggers(&mut self, dt: f64, normal: f64) {
@@ -726,13 +924,15 @@ impl ServoCore {
         } else {
             Vec2::zeros()
         };
+        self.update_safe(valid, dt);
+        let safe = self.safe.is_some();
         let dither = self.dither.step(dt);
         let mut extra = SetpointOffset::default();
-        let mode = self.mode;
+        let mode = if safe { None } else { Some(self.mode) };
         match mode {
             // Probe only once the force loop has brought the normal force back to the preload
             // (it is frozen during the strokes), or after waiting 3 s.
-            ServoMode::Stopping
+            Some(ServoMode::Stopping)
                 if self.hybrid.nominal_velocity() == 0.0 && self.force_settled(dt) =>
             {
                 let plan = self.plan_with_dither(self.params.tangent.first_plan());
@@ -740,14 +940,18 @@ impl ServoCore {
                 self.reprobe = false;
                 self.mode = ServoMode::Probing;
             }
-            ServoMode::Resuming if self.force_settled(dt) => {
+            Some(ServoMode::Resuming) if self.force_settled(dt) => {
                 self.mode = ServoMode::Track;
                 self.force_armed = false;
                 self.drift = 0.0;
                 self.hybrid.set_velocity(self.resume_velocity);
+                if let Some(a) = self.resume_a_omega.take() {
+                    self.set_a_omega(a);
+                }
             }
-            ServoMode::Probing => {
+            Some(ServoMode::Probing) => {
                 extra = self.probe.step(dt, force, self.arm.forward_at(&pose));
+                self.last_stroke = extra;
                 if self.probe.finished() {
                     self.mode = ServoMode::AwaitingEstimate;
                 }
@@ -788,7 +992,9 @@ impl ServoCore {
         } else {
             Vector2::zeros()
         };
-        if self.params.preload_feedforward && valid {
+        // The preload's feedforward depends on the configuration and the desired force, not on
+        // the measurement: it stays on in the safe state (the set-point backs off instead).
+        if self.params.preload_feedforward {
             let n_hat = self.hybrid.frame().normal();
             feedforward -=
                 self.arm.jacobian_at(&pose).transpose() * (n_hat * self.hybrid.params().preload_n);
@@ -812,10 +1018,10 @@ impl ServoCore {
         };
         let friction = -cmd.tangential_force_n * dir * ratio;
         let nominal = self.hybrid.nominal_velocity().abs();
-        if valid {
+        if valid && !safe {
             self.check_triggers(dt, normal);
         }
-        if self.tuning && valid && nominal > 0.0 && self.mode == ServoMode::Track {
+        if self.tuning && valid && !safe && nominal > 0.0 && self.mode == ServoMode::Track {
             let input = TunerInput {
                 friction_n: friction,
                 velocity_m_per_s: v_tan * dir,
@@ -841,6 +1047,8 @@ impl ServoCore {
             setpoint_held: held,
             mode: self.mode,
             tangent_angle_rad: self.hybrid.frame().tangent_angle,
+            velocity_target_m_per_s: self.hybrid.velocity_target(),
+            safe,
         };
         tau
     }

@@ -128,6 +128,7 @@ pub struct Lockstep {
     reading_time: f64,
     estimates: Vec<EstimateLog>,
     auto_estimate: bool,
+    force_valid: bool,
 }
 
 impl Lockstep {
@@ -169,6 +170,7 @@ impl Lockstep {
             reading_time: 0.0,
             estimates: Vec::new(),
             auto_estimate: true,
+            force_valid: true,
         })
     }
 
@@ -185,7 +187,7 @@ impl Lockstep {
             q,
             qd,
             wrench: self.reading.wrench,
-            force_valid: true,
+            force_valid: self.force_valid,
         };
         let tau = self.servo.step(&input, self.dt);
         self.plant.step(tau, self.dt);
@@ -219,6 +221,12 @@ impl Lockstep {
     /// answers through [`ServoCore::apply_tangent_outcome`].
     pub fn set_auto_estimate(&mut self, on: bool) {
         self.auto_estimate = on;
+    }
+
+    /// Marks the force data as (in)valid, as the servo process's watchdog does when the sensor
+    /// dies or sends garbage: with `false` the servo goes to its safe state.
+    pub fn set_force_valid(&mut self, valid: bool) {
+        self.force_valid = valid;
     }
 
     /// Every estimator answer so far.
@@ -321,6 +329,57 @@ mod tests {
         }
         assert_eq!(sim.servo().mode(), crate::servo::ServoMode::Track);
         assert!((sim.servo().hybrid().frame().tangent_angle - e.tangent_angle_rad).abs() < 1e-12);
+    }
+
+    /// Losing the force data mid-traverse with the dither running: tangential motion stops
+    /// within 50 ms, the dither is gone within 100 ms, from 30 ms on the normal force stays
+    /// below the preload and the tool keeps contact; when the data returns, the servo restores the preload, then velocity and
+    /// dither.
+    #[test]
+    fn lost_force_data_puts_the_servo_in_its_safe_state() {
+        let cfg = SimConfig::default();
+        let preload = cfg.servo.hybrid.preload_n;
+        let mut sim = Lockstep::new(&cfg).unwrap();
+        sim.servo_mut().hybrid_mut().set_velocity(0.01);
+        sim.servo_mut().set_a_omega(0.05);
+        sim.run(10_000);
+        let a_before = sim.servo().diag().a_omega_m_per_s;
+        assert!(a_before > 0.04);
+        sim.set_force_valid(false);
+        sim.step();
+        assert!(sim.servo().is_safe());
+        assert_eq!(sim.servo().hybrid().velocity_target(), 0.0);
+        let (mut max_after, mut min_after) = (0.0f64, f64::INFINITY);
+        for k in 1..5000 {
+            sim.step();
+            if k == 500 {
+                assert_eq!(sim.servo().hybrid().nominal_velocity(), 0.0);
+            }
+            if k == 1000 {
+                assert!(sim.servo().diag().a_omega_m_per_s < 0.01 * a_before);
+            }
+            if k >= 300 {
+                max_after = max_after.max(sim.truth().normal_force_n);
+                min_after = min_after.min(sim.truth().normal_force_n);
+            }
+        }
+        assert!(max_after <= preload, "normal force rose to {max_after} N");
+        assert!(
+            min_after > 0.5 * preload,
+            "contact nearly lost: {min_after} N"
+        );
+        assert_eq!(sim.servo().counters().safe_entries, 1);
+        sim.set_force_valid(true);
+        let mut n = 0;
+        while sim.servo().mode() != crate::servo::ServoMode::Track && n < 50_000 {
+            sim.step();
+            n += 1;
+        }
+        assert!(!sim.servo().is_safe());
+        assert_eq!(sim.servo().hybrid().velocity_target(), 0.01);
+        assert!((sim.servo().diag().a_omega_m_per_s - a_before).abs() < 1e-9);
+        sim.run(5000);
+        assert!((sim.truth().normal_force_n - preload).abs() < 0.5 * preload);
     }
 
     /// Same seed, same run, bit for bit.

@@ -27,6 +27,8 @@
 //! Derivations in `docs/surface-tracking.md`.
 
 use crate::math::{Vec2, perp, unit};
+use iceoryx2_bb_derive_macros::ZeroCopySend;
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::{Deserialize, Serialize};
 
 /// Most probes one estimate can use.
@@ -227,8 +229,9 @@ impl ProbePlan {
 /// Marks a hold sample (before the first probe) in [`ProbeSample::probe`].
 pub const HOLD: u8 = u8::MAX;
 
-/// One recorded sample of a probe run.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+/// One recorded sample of a probe run (also the payload element of a tangent request).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize, ZeroCopySend)]
+#[type_name("afs::ProbeSample")]
 #[repr(C)]
 pub struct ProbeSample {
     /// Time (s).

@@ -3,9 +3,7 @@
 
 use super::*;
 use crate::math::{Vec2, cross};
-use crate::multicontact::{
-    BoxParams, BoxPlant, Pose, friction_filter, response_fit, thesis_rotation_centre,
-};
+use crate::multicontact::{BoxParams, BoxPlant, Pose, estimate_rotation_centre, friction_filter};
 use crate::sensor::{SensorModel, SensorParams, Wrench};
 use serde::Serialize;
 
@@ -173,8 +171,6 @@ pub fn fig5_9(opts: &Options) -> Result<Outcome<Fig59Summary>, String> {
             p_hat + Vec2::new(diag, diag),
             p_hat + Vec2::new(diag, -diag),
         ];
-        let mut responses = [Vec2::zeros(); 3];
-        let mut rms = [[0.0; 2]; 3];
         let mut records: Vec<Vec<WrenchSample>> = Vec::new();
         let (mut f_sum, mut m_sum, mut n_mean) = (Vec2::zeros(), 0.0f64, 0.0f64);
         let mut friction_sum = Vec2::zeros();
@@ -215,30 +211,16 @@ pub fn fig5_9(opts: &Options) -> Result<Outcome<Fig59Summary>, String> {
             records.push(wrenches);
         }
         // In-phase response per radian of each dither (the suppression dither removed by a
-        // one-period comb).
-        let respond = |recs: &[Vec<WrenchSample>]| -> [Vec2; 3] {
-            let mut out = [Vec2::zeros(); 3];
-            for (k, rec) in recs.iter().enumerate() {
-                let series: Vec<(f64, f64, Vec2)> =
-                    rec.iter().map(|&(t, ph, f, _, _)| (t, ph, f)).collect();
-                let comp = |sel: fn(&Vec2) -> f64| -> f64 {
-                    let d: Vec<(f64, f64, f64)> =
-                        series.iter().map(|(t, ph, f)| (*t, *ph, sel(f))).collect();
-                    crate::tangent::in_phase_amplitude(&d, supp_hz).unwrap_or(0.0)
-                };
-                out[k] = Vec2::new(comp(|f| f.x), comp(|f| f.y)) / amp;
-            }
-            out
-        };
-        let raw = respond(&records);
-        for k in 0..3 {
-            responses[k] = raw[k];
-            rms[k] = [raw[k].x.abs() * amp, raw[k].y.abs() * amp];
-        }
-        let Some((est, a_fit)) = response_fit(&centres, &responses) else {
+        // one-period comb), then P from the signed responses and the thesis's unsigned form.
+        let flat: Vec<(usize, f64, f64, Vec2)> = records
+            .iter()
+            .enumerate()
+            .flat_map(|(k, rec)| rec.iter().map(move |&(t, ph, f, _, _)| (k, t, ph, f)))
+            .collect();
+        let Some(fit) = estimate_rotation_centre(&centres, &flat, amp, supp_hz) else {
             return Err("the rotation-centre estimate is singular".into());
         };
-        let thesis = thesis_rotation_centre(centres[0], centres[1], centres[2], rms);
+        let (est, a_fit, thesis) = (fit.centre, fit.response_matrix, fit.thesis_centre);
         // Friction filter on the mean wrench of the first dither: moments about R = the corner.
         let f_mean = f_sum / n_mean.max(1.0);
         let o = Vec2::new(base[0], base[1]);

@@ -308,56 +308,7 @@ pub fn tangent(opts: &Options) -> Result<Outcome<TangentSummary>, String> {
     })
 }
 
-/// One recorded instant of a tracking run (every 10 ms).
-#[derive(Debug, Clone, Copy, Serialize)]
-pub struct TrackSample {
-    /// Time (s).
-    pub t: f64,
-    /// Surface coordinate of the contact (m).
-    pub u_m: f64,
-    /// True tangent angle at the contact (rad).
-    pub true_angle_rad: f64,
-    /// Tangent angle the controller uses (rad).
-    pub estimated_angle_rad: f64,
-    /// True normal force (N).
-    pub normal_n: f64,
-    /// True while tracking (not stopped for an estimate).
-    pub moving: bool,
-}
-
-/// A tracking run's record and figures.
-#[derive(Debug, Clone, Serialize)]
-pub struct TrackingRun {
-    /// RMS of the tangent error while moving (deg).
-    pub tangent_error_rms_deg: f64,
-    /// Largest |tangent error| while moving (deg).
-    pub tangent_error_max_deg: f64,
-    /// Worst |F_N − preload| / preload after the first 0.5 s, of the true normal force
-    /// averaged over one dither period: the regulated force, without the dither's ripple.
-    pub worst_normal_deviation: f64,
-    /// Smallest and largest of that period-averaged force (N).
-    pub normal_range_n: [f64; 2],
-    /// When and where the worst period-averaged deviation happened (s, m).
-    pub worst_normal_at: [f64; 2],
-    /// RMS of the period-averaged |F_N − preload| / preload after 0.5 s.
-    pub normal_deviation_rms: f64,
-    /// Smallest and largest instantaneous true normal force after 0.5 s, ripple included (N).
-    pub instantaneous_normal_range_n: [f64; 2],
-    /// Servo ticks without contact.
-    pub ticks_without_contact: usize,
-    /// Estimation counters.
-    pub estimations: crate::servo::EstimationCounters,
-    /// Distance travelled along the surface (m).
-    pub travelled_m: f64,
-    /// Run time (s).
-    pub duration_s: f64,
-    /// The estimator's answers.
-    #[serde(skip)]
-    pub estimates: Vec<EstimateLog>,
-    /// The record.
-    #[serde(skip)]
-    pub samples: Vec<TrackSample>,
-}
+pub use crate::scenario::{TrackSample, TrackingRun};
 
 /// Tracks the surface of `cfg` from its start along +u at `velocity` until the contact reaches
 /// `u_end` (or `time_limit`), with tangent estimation triggered by the force limits and the
@@ -369,84 +320,29 @@ pub(crate) fn run_tracking(
     a_omega: f64,
     time_limit: f64,
 ) -> Result<TrackingRun, String> {
+    use crate::scenario::{MonitorTick, TrackingMonitor, plant_sample, servo_sample};
     let mut cfg = cfg.clone();
     cfg.servo.tracking.enabled = true;
-    let preload = cfg.servo.hybrid.preload_n;
     let mut sim = Lockstep::new(&cfg)?;
     sim.servo_mut().set_a_omega(a_omega);
     sim.servo_mut().hybrid_mut().set_velocity(velocity);
-    let u0 = sim.truth().surface_u_m;
-    let mut samples = Vec::new();
-    let (mut sq, mut n, mut max_err) = (0.0f64, 0.0f64, 0.0f64);
-    let (mut worst, mut fmin, mut fmax, mut lost) =
-        (0.0f64, f64::INFINITY, f64::NEG_INFINITY, 0usize);
-    let (mut imin, mut imax) = (f64::INFINITY, f64::NEG_INFINITY);
-    let mut worst_at = [0.0, 0.0];
-    let (mut dev_sq, mut dev_n) = (0.0f64, 0.0f64);
-    let mut period = crate::window::SlidingWindow::new(
-        (1.0 / (cfg.servo.dither.frequency_hz * sim.dt()))
-            .round()
-            .max(1.0) as usize,
-    );
-    let limit = (time_limit / sim.dt()) as usize;
-    for k in 0..limit {
+    let period = (1.0 / (cfg.servo.dither.frequency_hz * sim.dt()))
+        .round()
+        .max(1.0) as usize;
+    let mut monitor = TrackingMonitor::new(cfg.servo.hybrid.preload_n, period);
+    let limit = (time_limit / sim.dt()) as u64;
+    for seq in 0..limit {
         sim.step();
-        let tr = *sim.truth();
-        if tr.contact_count == 0 || tr.normal_force_n <= 0.0 {
-            lost += 1;
-        }
-        let moving = sim.servo().mode() == crate::servo::ServoMode::Track;
-        let est = sim.servo().diag().tangent_angle_rad;
-        let err = crate::math::wrap_angle(est - tr.tangent_angle_rad).to_degrees();
-        if moving {
-            sq += err * err;
-            n += 1.0;
-            max_err = max_err.max(err.abs());
-        }
-        period.push(tr.normal_force_n);
-        if sim.time() >= 0.5 {
-            let mean = period.mean();
-            let dev = (mean - preload).abs() / preload;
-            dev_sq += dev * dev;
-            dev_n += 1.0;
-            if dev > worst {
-                worst = dev;
-                worst_at = [sim.time(), tr.surface_u_m];
-            }
-            fmin = fmin.min(mean);
-            fmax = fmax.max(mean);
-            imin = imin.min(tr.normal_force_n);
-            imax = imax.max(tr.normal_force_n);
-        }
-        if k % 100 == 0 {
-            samples.push(TrackSample {
-                t: sim.time(),
-                u_m: tr.surface_u_m,
-                true_angle_rad: tr.tangent_angle_rad,
-                estimated_angle_rad: est,
-                normal_n: tr.normal_force_n,
-                moving,
-            });
-        }
-        if tr.surface_u_m >= u_end {
+        let p = plant_sample(sim.truth(), seq, 0);
+        let s = servo_sample(sim.servo(), seq, 0, sim.time());
+        monitor.push(&MonitorTick::from_samples(&p, &s));
+        if sim.truth().surface_u_m >= u_end {
             break;
         }
     }
-    Ok(TrackingRun {
-        tangent_error_rms_deg: (sq / n.max(1.0)).sqrt(),
-        tangent_error_max_deg: max_err,
-        worst_normal_deviation: worst,
-        normal_range_n: [fmin, fmax],
-        worst_normal_at: worst_at,
-        normal_deviation_rms: (dev_sq / dev_n.max(1.0)).sqrt(),
-        instantaneous_normal_range_n: [imin, imax],
-        ticks_without_contact: lost,
-        estimations: sim.servo().counters(),
-        travelled_m: sim.truth().surface_u_m - u0,
-        duration_s: sim.time(),
-        estimates: sim.estimates().to_vec(),
-        samples,
-    })
+    let mut run = monitor.finish(sim.servo().counters());
+    run.estimates = sim.estimates().to_vec();
+    Ok(run)
 }
 
 fn tracking_figure(title: String, runs: &[(&str, &TrackingRun)]) -> Figure {

@@ -1,0 +1,37 @@
+//! `afs-estimator`: tangent and rotation-centre estimation on request, friction identification.
+//!
+//! ```text
+//! afs-estimator --prefix afs --cpu 0
+//! ```
+
+use afs::board::{Common, stop_flag};
+use clap::Parser;
+use std::process::ExitCode;
+
+/// The estimator board.
+#[derive(Parser)]
+#[command(name = "afs-estimator", version)]
+struct Cli {
+    #[command(flatten)]
+    common: Common,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = (|| {
+        afs::ipc::check_prefix(&cli.common.prefix)?;
+        let r = afs::rt::setup(cli.common.priority, false, cli.common.cpu);
+        for w in &r.warnings {
+            eprintln!("afs-estimator: warning: {w}");
+        }
+        let stop = stop_flag()?;
+        afs::estimator_board::run(&cli.common.prefix, &stop)
+    })();
+    match result {
+        Ok(_) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("afs-estimator: error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}

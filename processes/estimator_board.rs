@@ -1,0 +1,184 @@
+//! The estimator board: a request-response server for tangent estimation and rotation-centre
+//! estimation, and the on-line friction identification it publishes at about 1 Hz.
+//!
+//! Stateless as a server: each request carries the whole probe record, the plan and the
+//! settings, so a restarted estimator answers the servo's retry exactly as the first one
+//! would have. It runs at normal priority on its own core and polls its ports every
+//! millisecond.
+
+use crate::ipc;
+use crate::rt;
+use afs_shared::ident::OnlineFrictionId;
+use afs_shared::math::Vec2;
+use afs_shared::msg::{
+    self, FRICTION_LAW_VALID, FRICTION_MU_VALID, FrictionReport, RotationResponse, TangentResponse,
+};
+use afs_shared::multicontact::estimate_rotation_centre;
+use afs_shared::scenario::ident_tick;
+use afs_shared::tangent;
+use anyhow::Result;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+/// What the board did.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct EstimatorSummary {
+    /// Tangent requests answered.
+    pub tangent_requests: u64,
+    /// Rotation requests answered.
+    pub rotation_requests: u64,
+    /// Requests refused as malformed.
+    pub bad_requests: u64,
+    /// Friction reports published.
+    pub friction_reports: u64,
+}
+
+/// Runs until `stop` is set.
+pub fn run(prefix: &str, stop: &AtomicBool) -> Result<EstimatorSummary> {
+    let node = ipc::node(prefix, "estimator")?;
+    let tangent_server = ipc::tangent(&node)?
+        .server_builder()
+        .create()
+        .map_err(|e| anyhow::anyhow!("tangent server: {e:?}"))?;
+    let rotation_server = ipc::rotation(&node)?
+        .server_builder()
+        .create()
+        .map_err(|e| anyhow::anyhow!("rotation server: {e:?}"))?;
+    let friction_pub = ipc::friction(&node)?
+        .publisher_builder()
+        .create()
+        .map_err(|e| anyhow::anyhow!("friction publisher: {e:?}"))?;
+    let servo_sub = ipc::servo(&node)?
+        .subscriber_builder()
+        .buffer_size(ipc::TICK_BUFFER)
+        .create()
+        .map_err(|e| anyhow::anyhow!("servo subscriber: {e:?}"))?;
+    let mut ident = OnlineFrictionId::new(0.2, 0.25, 4096);
+    let mut summary = EstimatorSummary::default();
+    let mut report = FrictionReport {
+        version: msg::VERSION,
+        mu: f64::NAN,
+        mu_std: f64::NAN,
+        kinetic_n: f64::NAN,
+        viscous_n_s_per_m: f64::NAN,
+        stribeck_n: f64::NAN,
+        stribeck_velocity_m_per_s: f64::NAN,
+        rms_residual_n: f64::NAN,
+        ..Default::default()
+    };
+    let mut next_report = rt::monotonic_ns() + 1_000_000_000;
+    while !stop.load(Ordering::Relaxed) {
+        std::thread::sleep(Duration::from_millis(1));
+        while let Ok(Some(s)) = servo_sub.receive() {
+            if s.payload().version == msg::VERSION {
+                ident.push(&ident_tick(s.payload()));
+            }
+        }
+        while let Ok(Some(req)) = tangent_server.receive() {
+            let h = *req.user_header();
+            let answer = if h.version != msg::VERSION {
+                None
+            } else {
+                match (h.plan.to_plan(), h.params.to_params()) {
+                    (Some(plan), Ok(params)) if h.base_angle_rad.is_finite() => {
+                        let outcome = tangent::estimate(
+                            req.payload(),
+                            &plan,
+                            h.base_angle_rad,
+                            &params,
+                            h.reprobe != 0,
+                        );
+                        Some(TangentResponse::from_outcome(h.request_id, &outcome))
+                    }
+                    _ => None,
+                }
+            };
+            let mut r = answer.unwrap_or_else(|| {
+                summary.bad_requests += 1;
+                TangentResponse::bad_request(h.request_id)
+            });
+            r.publish_ns = rt::monotonic_ns();
+            if req.send_copy(r).is_ok() {
+                summary.tangent_requests += 1;
+            }
+        }
+        while let Ok(Some(req)) = rotation_server.receive() {
+            let h = *req.user_header();
+            let n = (h.centres as usize).min(msg::MAX_CENTRES);
+            let mut r = RotationResponse {
+                version: msg::VERSION,
+                request_id: h.request_id,
+                outcome: 3,
+                centre_m: [f64::NAN; 2],
+                thesis_centre_m: [f64::NAN; 2],
+                response_matrix: [f64::NAN; 4],
+                coupling: f64::NAN,
+                ..Default::default()
+            };
+            if h.version == msg::VERSION && n >= 3 {
+                let centres: Vec<Vec2> = h.centre_m[..n]
+                    .iter()
+                    .map(|c| Vec2::new(c[0], c[1]))
+                    .collect();
+                let samples: Vec<(usize, f64, f64, Vec2)> = req
+                    .payload()
+                    .iter()
+                    .map(|s| {
+                        (
+                            s.dither as usize,
+                            s.t,
+                            s.phase,
+                            Vec2::new(s.force_n[0], s.force_n[1]),
+                        )
+                    })
+                    .collect();
+                r.outcome = 2;
+                if let Some(e) =
+                    estimate_rotation_centre(&centres, &samples, h.amplitude_rad, h.suppression_hz)
+                {
+                    r.outcome = 0;
+                    r.centre_m = [e.centre.x, e.centre.y];
+                    if let Some(t) = e.thesis_centre {
+                        r.thesis_centre_m = [t.x, t.y];
+                    }
+                    let a = e.response_matrix;
+                    r.response_matrix = [a[(0, 0)], a[(0, 1)], a[(1, 0)], a[(1, 1)]];
+                    r.coupling = e.coupling;
+                }
+            } else {
+                summary.bad_requests += 1;
+            }
+            r.publish_ns = rt::monotonic_ns();
+            if req.send_copy(r).is_ok() {
+                summary.rotation_requests += 1;
+            }
+        }
+        let now = rt::monotonic_ns();
+        if now >= next_report {
+            next_report = now + 1_000_000_000;
+            let id = ident.report();
+            report.seq += 1;
+            report.windows = id.windows as u64;
+            report.speeds = u32::try_from(id.speeds).unwrap_or(u32::MAX);
+            report.status = 0;
+            if let Some((mu, sd)) = id.mu {
+                report.status |= FRICTION_MU_VALID;
+                report.mu = mu;
+                report.mu_std = sd;
+            }
+            if let Some(f) = id.fit {
+                report.status |= FRICTION_LAW_VALID;
+                report.kinetic_n = f.law.kinetic_n;
+                report.viscous_n_s_per_m = f.law.viscous_n_s_per_m;
+                report.stribeck_n = f.law.stribeck_n;
+                report.stribeck_velocity_m_per_s = f.law.stribeck_velocity_m_per_s;
+                report.rms_residual_n = f.rms_residual_n;
+            }
+            report.publish_ns = now;
+            if friction_pub.send_copy(report).is_ok() {
+                summary.friction_reports += 1;
+            }
+        }
+    }
+    Ok(summary)
+}

@@ -1,0 +1,338 @@
+//! The stack's iceoryx2 wiring: one config per stack prefix, and the services with the
+//! quality-of-service settings every process opens them with (so any process may come first).
+//!
+//! Stacks are isolated by iceoryx2's file prefix: a stack with prefix `P` keeps every shared
+//! memory segment and every file under the iceoryx2 root with names starting `afs_P_`, so two
+//! stacks run side by side and a stack's leftovers are easy to find (`leftovers`).
+
+use afs_shared::msg::{
+    FrictionReport, LoopStats, PlantSample, RotationRequestHeader, RotationResponse,
+    RotationSample, ServoSample, SupervisorStatus, TangentRequestHeader, TangentResponse,
+    WorldSnapshot, WrenchSample, service,
+};
+use afs_shared::tangent::ProbeSample;
+use anyhow::{Context, Result, bail};
+use iceoryx2::node::NodeView;
+use iceoryx2::port::backpressure_strategy::BackpressureStrategy;
+use iceoryx2::prelude::*;
+use iceoryx2::service::port_factory::{blackboard, publish_subscribe, request_response};
+use std::path::{Path, PathBuf};
+
+/// The iceoryx2 service type of the stack: inter-process.
+pub type Svc = ipc::Service;
+
+/// Largest number of samples a subscriber of a per-tick stream may buffer (2 s at 10 kHz).
+pub const TICK_BUFFER: usize = 20_000;
+/// Largest number of wrench samples a subscriber may buffer (about 1 s at 7 kHz).
+pub const WRENCH_BUFFER: usize = 8_192;
+/// Largest probe record a tangent request carries (samples): a re-probe plan at 1 kHz with
+/// margin.
+pub const MAX_PROBE_SAMPLES: usize = 40_000;
+/// Largest rotation-dither record (samples).
+pub const MAX_ROTATION_SAMPLES: usize = 100_000;
+
+/// Checks a stack prefix: 1–32 characters of `[A-Za-z0-9_-]`.
+pub fn check_prefix(prefix: &str) -> Result<()> {
+    if prefix.is_empty()
+        || prefix.len() > 32
+        || !prefix
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+    {
+        bail!("invalid stack prefix '{prefix}': use 1 to 32 letters, digits, '_' or '-'");
+    }
+    Ok(())
+}
+
+/// The iceoryx2 file-name prefix of stack `prefix`.
+pub fn file_prefix(prefix: &str) -> String {
+    format!("afs_{prefix}_")
+}
+
+/// The iceoryx2 config of stack `prefix`.
+pub fn config(prefix: &str) -> Result<Config> {
+    check_prefix(prefix)?;
+    let mut c = Config::default();
+    c.global.prefix = FileName::new(file_prefix(prefix).as_bytes())
+        .map_err(|e| anyhow::anyhow!("stack prefix '{prefix}': {e:?}"))?;
+    Ok(c)
+}
+
+/// A node of stack `prefix` named `name`; iceoryx2's own signal handling is off (the
+/// processes handle SIGINT/SIGTERM themselves).
+pub fn node(prefix: &str, name: &str) -> Result<Node<Svc>> {
+    let cfg = config(prefix)?;
+    let node_name: NodeName = name
+        .try_into()
+        .map_err(|e| anyhow::anyhow!("node name '{name}': {e:?}"))?;
+    NodeBuilder::new()
+        .name(&node_name)
+        .config(&cfg)
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<Svc>()
+        .map_err(|e| anyhow::anyhow!("creating iceoryx2 node '{name}' for stack '{prefix}': {e:?}"))
+}
+
+fn name(s: &str) -> Result<ServiceName> {
+    s.try_into()
+        .map_err(|e| anyhow::anyhow!("service name '{s}': {e:?}"))
+}
+
+/// A per-tick stream (plant or servo samples).
+pub fn tick_stream<T>(
+    node: &Node<Svc>,
+    service_name: &str,
+) -> Result<publish_subscribe::PortFactory<Svc, T, ()>>
+where
+    T: std::fmt::Debug + ZeroCopySend + 'static,
+{
+    node.service_builder(&name(service_name)?)
+        .publish_subscribe::<T>()
+        .enable_safe_overflow(true)
+        .history_size(1)
+        .subscriber_max_buffer_size(TICK_BUFFER)
+        .subscriber_max_borrowed_samples(4)
+        .max_subscribers(4)
+        .max_publishers(1)
+        .max_nodes(8)
+        .open_or_create()
+        .map_err(|e| anyhow::anyhow!("opening service '{service_name}': {e:?}"))
+}
+
+/// The plant stream.
+pub fn plant(node: &Node<Svc>) -> Result<publish_subscribe::PortFactory<Svc, PlantSample, ()>> {
+    tick_stream(node, service::PLANT)
+}
+
+/// The servo stream.
+pub fn servo(node: &Node<Svc>) -> Result<publish_subscribe::PortFactory<Svc, ServoSample, ()>> {
+    tick_stream(node, service::SERVO)
+}
+
+/// The wrench stream.
+pub fn wrench(node: &Node<Svc>) -> Result<publish_subscribe::PortFactory<Svc, WrenchSample, ()>> {
+    node.service_builder(&name(service::WRENCH)?)
+        .publish_subscribe::<WrenchSample>()
+        .enable_safe_overflow(true)
+        .history_size(1)
+        .subscriber_max_buffer_size(WRENCH_BUFFER)
+        .subscriber_max_borrowed_samples(4)
+        .max_subscribers(8)
+        .max_publishers(2)
+        .max_nodes(12)
+        .open_or_create()
+        .map_err(|e| anyhow::anyhow!("opening service '{}': {e:?}", service::WRENCH))
+}
+
+/// A low-rate status stream (history 1 so a late subscriber gets the latest at once).
+pub fn status_stream<T>(
+    node: &Node<Svc>,
+    service_name: &str,
+) -> Result<publish_subscribe::PortFactory<Svc, T, ()>>
+where
+    T: std::fmt::Debug + ZeroCopySend + 'static,
+{
+    node.service_builder(&name(service_name)?)
+        .publish_subscribe::<T>()
+        .enable_safe_overflow(true)
+        .history_size(1)
+        .subscriber_max_buffer_size(64)
+        .max_subscribers(8)
+        .max_publishers(1)
+        .max_nodes(12)
+        .open_or_create()
+        .map_err(|e| anyhow::anyhow!("opening service '{service_name}': {e:?}"))
+}
+
+/// The loop statistics stream.
+pub fn loop_stats(node: &Node<Svc>) -> Result<publish_subscribe::PortFactory<Svc, LoopStats, ()>> {
+    status_stream(node, service::LOOP_STATS)
+}
+
+/// The friction identification stream.
+pub fn friction(
+    node: &Node<Svc>,
+) -> Result<publish_subscribe::PortFactory<Svc, FrictionReport, ()>> {
+    status_stream(node, service::FRICTION)
+}
+
+/// The supervisor's status stream.
+pub fn supervisor(
+    node: &Node<Svc>,
+) -> Result<publish_subscribe::PortFactory<Svc, SupervisorStatus, ()>> {
+    status_stream(node, service::SUPERVISOR)
+}
+
+/// The tangent-estimation request-response service.
+pub fn tangent(
+    node: &Node<Svc>,
+) -> Result<
+    request_response::PortFactory<Svc, [ProbeSample], TangentRequestHeader, TangentResponse, ()>,
+> {
+    node.service_builder(&name(service::TANGENT)?)
+        .request_response::<[ProbeSample], TangentResponse>()
+        .request_user_header::<TangentRequestHeader>()
+        .enable_safe_overflow_for_requests(true)
+        .enable_safe_overflow_for_responses(true)
+        .max_active_requests_per_client(2)
+        .max_loaned_requests(2)
+        .max_response_buffer_size(4)
+        .max_servers(2)
+        .max_clients(4)
+        .max_nodes(8)
+        .open_or_create()
+        .map_err(|e| anyhow::anyhow!("opening service '{}': {e:?}", service::TANGENT))
+}
+
+/// The rotation-centre request-response service.
+pub fn rotation(
+    node: &Node<Svc>,
+) -> Result<
+    request_response::PortFactory<
+        Svc,
+        [RotationSample],
+        RotationRequestHeader,
+        RotationResponse,
+        (),
+    >,
+> {
+    node.service_builder(&name(service::ROTATION)?)
+        .request_response::<[RotationSample], RotationResponse>()
+        .request_user_header::<RotationRequestHeader>()
+        .enable_safe_overflow_for_requests(true)
+        .enable_safe_overflow_for_responses(true)
+        .max_active_requests_per_client(2)
+        .max_loaned_requests(2)
+        .max_response_buffer_size(4)
+        .max_servers(2)
+        .max_clients(4)
+        .max_nodes(8)
+        .open_or_create()
+        .map_err(|e| anyhow::anyhow!("opening service '{}': {e:?}", service::ROTATION))
+}
+
+/// Creates the world-state blackboard (the supervisor owns it, so it outlives a servo).
+pub fn create_world(node: &Node<Svc>) -> Result<blackboard::PortFactory<Svc, u64>> {
+    node.service_builder(&name(service::WORLD)?)
+        .blackboard_creator::<u64>()
+        .max_readers(4)
+        .add::<WorldSnapshot>(0, WorldSnapshot::default())
+        .create()
+        .map_err(|e| anyhow::anyhow!("creating blackboard '{}': {e:?}", service::WORLD))
+}
+
+/// Opens the world-state blackboard, if the supervisor made one.
+pub fn open_world(node: &Node<Svc>) -> Option<blackboard::PortFactory<Svc, u64>> {
+    node.service_builder(&name(service::WORLD).ok()?)
+        .blackboard_opener::<u64>()
+        .open()
+        .ok()
+}
+
+/// The publisher settings of every stream: never block the publisher.
+pub const BACKPRESSURE: BackpressureStrategy = BackpressureStrategy::DiscardData;
+
+/// What `Node::list` says about a stack's nodes.
+#[derive(Debug, Default, Clone)]
+pub struct NodeCensus {
+    /// Alive nodes: (name, pid).
+    pub alive: Vec<(String, i32)>,
+    /// Dead nodes whose resources were removed.
+    pub cleaned: usize,
+    /// Dead nodes that could not be cleaned.
+    pub failed: usize,
+}
+
+/// Lists the nodes of stack `prefix`; with `clean`, removes the resources of dead ones.
+pub fn census(prefix: &str, clean: bool) -> Result<NodeCensus> {
+    let cfg = config(prefix)?;
+    let mut out = NodeCensus::default();
+    let mut dead = Vec::new();
+    Node::<Svc>::list(&cfg, |state| {
+        match state {
+            NodeState::Alive(v) => {
+                let (n, pid) = v.details().as_ref().map_or((String::from("?"), 0), |d| {
+                    (d.name().to_string(), d.process_id().value())
+                });
+                out.alive.push((n, pid));
+            }
+            NodeState::Dead(v) => dead.push(v),
+            _ => {}
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| anyhow::anyhow!("listing iceoryx2 nodes of stack '{prefix}': {e:?}"))?;
+    if clean {
+        for v in dead {
+            match v.try_remove_stale_resources() {
+                Ok(()) => out.cleaned += 1,
+                Err(_) => out.failed += 1,
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Files of stack `prefix` left in /dev/shm and under the iceoryx2 root.
+pub fn leftovers(prefix: &str) -> Vec<PathBuf> {
+    let p = file_prefix(prefix);
+    let mut out = Vec::new();
+    let root = config(prefix)
+        .map(|c| PathBuf::from(c.global.root_path().to_string()))
+        .unwrap_or_else(|_| PathBuf::from("/tmp/iceoryx2"));
+    scan(Path::new("/dev/shm"), &p, &mut out, 0);
+    scan(&root, &p, &mut out, 0);
+    out
+}
+
+fn scan(dir: &Path, prefix: &str, out: &mut Vec<PathBuf>, depth: usize) {
+    let Ok(rd) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for e in rd.flatten() {
+        let path = e.path();
+        let name = e.file_name().to_string_lossy().into_owned();
+        if name.starts_with(prefix) {
+            out.push(path.clone());
+        }
+        if depth < 4 && e.file_type().is_ok_and(|t| t.is_dir()) {
+            scan(&path, prefix, out, depth + 1);
+        }
+    }
+}
+
+/// Removes whatever of stack `prefix` is left after its nodes are gone: first through
+/// iceoryx2's dead-node clean-up, then any file still carrying the prefix. Returns what had to
+/// be removed by name (which iceoryx2 could not).
+pub fn remove_leftovers(prefix: &str) -> Result<Vec<PathBuf>> {
+    let c = census(prefix, true).context("cleaning dead nodes")?;
+    if !c.alive.is_empty() {
+        bail!(
+            "stack '{prefix}' still has live nodes ({}); not removing its files",
+            c.alive
+                .iter()
+                .map(|(n, p)| format!("{n} pid {p}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    // The node-id counter segment is shared by every node of the domain and persists by
+    // design; with no node of the stack alive it can go.
+    if let Ok(cfg) = config(prefix) {
+        // SAFETY: no process uses this stack's domain any more (census above found none).
+        let _ = unsafe { iceoryx2::testing::remove_global_mgmt_segment::<Svc>(&cfg) };
+    }
+    let left = leftovers(prefix);
+    let mut removed = Vec::new();
+    for f in &left {
+        let r = if f.is_dir() {
+            std::fs::remove_dir_all(f)
+        } else {
+            std::fs::remove_file(f)
+        };
+        if r.is_ok() {
+            removed.push(f.clone());
+        }
+    }
+    Ok(removed)
+}

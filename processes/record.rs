@@ -1,0 +1,375 @@
+//! Recording every topic of a running stack to MCAP (JSON messages with a JSON schema per
+//! topic, zstd-compressed chunks: Foxglove opens it as is), and reading it back for `afs plot`
+//! and the CSV export.
+//!
+//! The supervisor hands samples to a writer thread through a bounded channel; the thread
+//! serialises and writes them in the order received. A full channel drops the sample and
+//! counts it (the summary reports the count), so a slow disk can never stall the supervisor.
+
+use afs_shared::msg::{
+    self, FrictionReport, LoopStats, PlantSample, ServoSample, SupervisorStatus, WrenchSample,
+};
+use anyhow::{Context, Result};
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
+use std::thread::JoinHandle;
+
+/// One recorded sample.
+#[derive(Debug, Clone, Copy)]
+pub enum Rec {
+    /// `/plant`.
+    Plant(PlantSample),
+    /// `/servo`.
+    Servo(ServoSample),
+    /// `/wrench`.
+    Wrench(WrenchSample),
+    /// `/loop_stats`.
+    Stats(LoopStats),
+    /// `/friction`.
+    Friction(FrictionReport),
+    /// `/supervisor`.
+    Status(SupervisorStatus),
+}
+
+/// The topics, in channel order: (topic, message type name).
+pub const TOPICS: [(&str, &str); 6] = [
+    ("/plant", "afs::PlantSample"),
+    ("/servo", "afs::ServoSample"),
+    ("/wrench", "afs::WrenchSample"),
+    ("/loop_stats", "afs::LoopStats"),
+    ("/friction", "afs::FrictionReport"),
+    ("/supervisor", "afs::SupervisorStatus"),
+];
+
+impl Rec {
+    fn channel(&self) -> usize {
+        match self {
+            Rec::Plant(_) => 0,
+            Rec::Servo(_) => 1,
+            Rec::Wrench(_) => 2,
+            Rec::Stats(_) => 3,
+            Rec::Friction(_) => 4,
+            Rec::Status(_) => 5,
+        }
+    }
+
+    fn publish_ns(&self) -> u64 {
+        match self {
+            Rec::Plant(s) => s.publish_ns,
+            Rec::Servo(s) => s.publish_ns,
+            Rec::Wrench(s) => s.publish_ns,
+            Rec::Stats(s) => s.publish_ns,
+            Rec::Friction(s) => s.publish_ns,
+            Rec::Status(s) => s.publish_ns,
+        }
+    }
+
+    fn json(&self) -> serde_json::Result<Vec<u8>> {
+        fn j<T: Serialize>(t: &T) -> serde_json::Result<Vec<u8>> {
+            serde_json::to_vec(t)
+        }
+        match self {
+            Rec::Plant(s) => j(s),
+            Rec::Servo(s) => j(s),
+            Rec::Wrench(s) => j(s),
+            Rec::Stats(s) => j(s),
+            Rec::Friction(s) => j(s),
+            Rec::Status(s) => j(s),
+        }
+    }
+}
+
+/// What a recording holds.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct RecordSummary {
+    /// The file.
+    pub path: PathBuf,
+    /// Messages written per topic.
+    pub messages: BTreeMap<String, u64>,
+    /// Samples dropped because the writer fell behind.
+    pub dropped: u64,
+    /// File size (bytes).
+    pub bytes: u64,
+}
+
+/// A recording in progress.
+pub struct Recorder {
+    tx: SyncSender<Rec>,
+    dropped: u64,
+    handle: JoinHandle<Result<RecordSummary>>,
+}
+
+/// Samples the channel holds before dropping (about 7 s of the stack's streams).
+const QUEUE: usize = 200_000;
+
+impl Recorder {
+    /// Starts recording to `path` (created or truncated).
+    pub fn start(path: &Path) -> Result<Self> {
+        let file = std::fs::File::create(path)
+            .with_context(|| format!("creating recording {}", path.display()))?;
+        let (tx, rx) = sync_channel(QUEUE);
+        let p = path.to_path_buf();
+        let handle = std::thread::Builder::new()
+            .name("afs-recorder".into())
+            .spawn(move || write_all(file, rx, p))
+            .context("starting the recorder thread")?;
+        Ok(Self {
+            tx,
+            dropped: 0,
+            handle,
+        })
+    }
+
+    /// Queues a sample; never blocks.
+    pub fn push(&mut self, r: Rec) {
+        match self.tx.try_send(r) {
+            Ok(()) => {}
+            Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => self.dropped += 1,
+        }
+    }
+
+    /// Flushes and closes the file.
+    pub fn finish(self) -> Result<RecordSummary> {
+        drop(self.tx);
+        let mut s = self
+            .handle
+            .join()
+            .map_err(|_| anyhow::anyhow!("the recorder thread panicked"))??;
+        s.dropped += self.dropped;
+        Ok(s)
+    }
+}
+
+/// A JSON schema of a message type, from its byte layout (numbers, arrays of numbers, nested
+/// objects).
+pub fn json_schema(type_name: &str) -> String {
+    let layouts = msg::layouts();
+    let Some(l) = layouts.iter().find(|l| l.type_name == type_name) else {
+        return r#"{"type":"object"}"#.into();
+    };
+    let mut props = serde_json::Map::new();
+    for f in &l.fields {
+        let scalar = if f.ty.starts_with('u') || f.ty.starts_with('i') {
+            "integer"
+        } else if f.ty.starts_with("bool") {
+            "boolean"
+        } else if f.ty.starts_with('f') {
+            "number"
+        } else {
+            "object"
+        };
+        let v = if f.ty.contains('[') {
+            serde_json::json!({"type": "array", "items": {"type": scalar}})
+        } else {
+            serde_json::json!({"type": scalar})
+        };
+        props.insert(f.name.to_string(), v);
+    }
+    serde_json::json!({"type": "object", "title": type_name, "properties": props}).to_string()
+}
+
+fn write_all(file: std::fs::File, rx: Receiver<Rec>, path: PathBuf) -> Result<RecordSummary> {
+    let opts = mcap::WriteOptions::new()
+        .compression(Some(mcap::Compression::Zstd))
+        .profile("")
+        .library("afs");
+    let mut w = opts
+        .create(BufWriter::new(file))
+        .context("starting the MCAP file")?;
+    let mut channels = Vec::new();
+    for (topic, ty) in TOPICS {
+        let schema = w
+            .add_schema(ty, "jsonschema", json_schema(ty).as_bytes())
+            .context("MCAP schema")?;
+        let ch = w
+            .add_channel(schema, topic, "json", &BTreeMap::new())
+            .context("MCAP channel")?;
+        channels.push(ch);
+    }
+    let mut counts = [0u64; TOPICS.len()];
+    let mut summary = RecordSummary {
+        path: path.clone(),
+        ..Default::default()
+    };
+    for r in rx {
+        let c = r.channel();
+        let Ok(data) = r.json() else {
+            summary.dropped += 1;
+            continue;
+        };
+        let t = r.publish_ns();
+        w.write_to_known_channel(
+            &mcap::records::MessageHeader {
+                channel_id: channels[c],
+                sequence: counts[c] as u32,
+                log_time: t,
+                publish_time: t,
+            },
+            &data,
+        )
+        .context("writing the recording")?;
+        counts[c] += 1;
+    }
+    w.finish().context("closing the recording")?;
+    drop(w);
+    for (i, (topic, _)) in TOPICS.iter().enumerate() {
+        summary.messages.insert((*topic).into(), counts[i]);
+    }
+    summary.bytes = std::fs::metadata(&path).map_or(0, |m| m.len());
+    Ok(summary)
+}
+
+/// Every message of a recording, by topic, as JSON values in recorded order.
+pub fn read(path: &Path) -> Result<BTreeMap<String, Vec<serde_json::Value>>> {
+    let bytes =
+        std::fs::read(path).with_context(|| format!("reading recording {}", path.display()))?;
+    let mut out: BTreeMap<String, Vec<serde_json::Value>> = BTreeMap::new();
+    let stream = mcap::MessageStream::new(&bytes)
+        .with_context(|| format!("{} is not an MCAP file", path.display()))?;
+    for m in stream {
+        let m = m.with_context(|| format!("a damaged record in {}", path.display()))?;
+        let v: serde_json::Value = serde_json::from_slice(&m.data)
+            .with_context(|| format!("a message on {} is not JSON", m.channel.topic))?;
+        out.entry(m.channel.topic.clone()).or_default().push(v);
+    }
+    Ok(out)
+}
+
+fn flatten(prefix: &str, v: &serde_json::Value, out: &mut Vec<(String, String)>) {
+    match v {
+        serde_json::Value::Object(m) => {
+            for (k, x) in m {
+                let key = if prefix.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{prefix}.{k}")
+                };
+                flatten(&key, x, out);
+            }
+        }
+        serde_json::Value::Array(a) => {
+            for (i, x) in a.iter().enumerate() {
+                flatten(&format!("{prefix}[{i}]"), x, out);
+            }
+        }
+        other => out.push((prefix.to_string(), other.to_string())),
+    }
+}
+
+/// Writes one CSV per topic into `dir` (`plant.csv`, `servo.csv`, …); returns the files.
+pub fn export_csv(recording: &Path, dir: &Path) -> Result<Vec<PathBuf>> {
+    use std::io::Write as _;
+    let topics = read(recording)?;
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let mut files = Vec::new();
+    for (topic, msgs) in topics {
+        let Some(first) = msgs.first() else { continue };
+        let mut head = Vec::new();
+        flatten("", first, &mut head);
+        let path = dir.join(format!("{}.csv", topic.trim_start_matches('/')));
+        let mut f = BufWriter::new(
+            std::fs::File::create(&path).with_context(|| format!("creating {}", path.display()))?,
+        );
+        writeln!(
+            f,
+            "{}",
+            head.iter()
+                .map(|h| h.0.as_str())
+                .collect::<Vec<_>>()
+                .join(",")
+        )?;
+        for m in &msgs {
+            let mut row = Vec::new();
+            flatten("", m, &mut row);
+            writeln!(
+                f,
+                "{}",
+                row.iter()
+                    .map(|r| r.1.as_str())
+                    .collect::<Vec<_>>()
+                    .join(",")
+            )?;
+        }
+        f.flush()?;
+        files.push(path);
+    }
+    Ok(files)
+}
+
+/// The force, position and dither histories of a recording as a figure (at most about 4000
+/// points per series).
+pub fn figure(recording: &Path) -> Result<afs_shared::experiments::Figure> {
+    use afs_shared::experiments::{Figure, Panel, Series};
+    let topics = read(recording)?;
+    let empty = Vec::new();
+    let plant = topics.get("/plant").unwrap_or(&empty);
+    let servo = topics.get("/servo").unwrap_or(&empty);
+    if plant.is_empty() && servo.is_empty() {
+        anyhow::bail!(
+            "{} has no /plant or /servo messages; was it recorded with `afs run --record`?",
+            recording.display()
+        );
+    }
+    let every = |n: usize| (n / 4000).max(1);
+    let pick = |msgs: &[serde_json::Value], f: &dyn Fn(&serde_json::Value) -> Option<f64>| {
+        msgs.iter()
+            .step_by(every(msgs.len()))
+            .filter_map(|m| Some([m["time_s"].as_f64()?, f(m)?]))
+            .collect::<Vec<_>>()
+    };
+    let line = |label: &str, points: Vec<[f64; 2]>| Series {
+        label: label.into(),
+        points,
+        markers: false,
+    };
+    let num = |m: &serde_json::Value, k: &str| m[k].as_f64();
+    let idx = |m: &serde_json::Value, k: &str, i: usize| m[k][i].as_f64();
+    Ok(Figure {
+        title: format!("recording {}", recording.display()),
+        x_label: "simulated time (s)".into(),
+        log_x: false,
+        panels: vec![
+            Panel {
+                y_label: "normal force (N)".into(),
+                series: vec![
+                    line("measured", pick(servo, &|m| num(m, "normal_force_n"))),
+                    line("true", pick(plant, &|m| num(m, "normal_force_n"))),
+                ],
+            },
+            Panel {
+                y_label: "tangential force (N)".into(),
+                series: vec![line(
+                    "measured",
+                    pick(servo, &|m| num(m, "tangential_force_n")),
+                )],
+            },
+            Panel {
+                y_label: "position along the surface (mm)".into(),
+                series: vec![line(
+                    "contact u",
+                    pick(plant, &|m| num(m, "surface_u_m").map(|u| u * 1e3)),
+                )],
+            },
+            Panel {
+                y_label: "tip height (mm)".into(),
+                series: vec![
+                    line("tip", pick(plant, &|m| idx(m, "tip_m", 1).map(|y| y * 1e3))),
+                    line(
+                        "set-point",
+                        pick(servo, &|m| idx(m, "set_point_m", 1).map(|y| y * 1e3)),
+                    ),
+                ],
+            },
+            Panel {
+                y_label: "dither Aω (mm/s)".into(),
+                series: vec![line(
+                    "commanded",
+                    pick(servo, &|m| num(m, "a_omega_m_per_s").map(|a| a * 1e3)),
+                )],
+            },
+        ],
+    })
+}

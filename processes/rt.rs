@@ -1,0 +1,158 @@
+//! Real-time plumbing for the process shells: the monotonic clock every timestamp uses,
+//! absolute-time sleeps, SCHED_FIFO, mlockall and CPU affinity. Each setting degrades to a
+//! warning where the system refuses it; nothing here busy-spins.
+
+use std::io;
+
+/// `CLOCK_MONOTONIC` in nanoseconds: the one clock of every timestamp in the stack.
+pub fn monotonic_ns() -> u64 {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: clock_gettime writes into the timespec we own; CLOCK_MONOTONIC always exists on
+    // Linux.
+    unsafe {
+        libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts);
+    }
+    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
+}
+
+/// Sleeps until the monotonic time `deadline_ns` (absolute, so periods do not drift). Returns
+/// at once if the deadline has passed; resumes after signals.
+pub fn sleep_until(deadline_ns: u64) {
+    let ts = libc::timespec {
+        tv_sec: (deadline_ns / 1_000_000_000) as libc::time_t,
+        tv_nsec: (deadline_ns % 1_000_000_000) as libc::c_long,
+    };
+    loop {
+        // SAFETY: the timespec is valid; the remaining-time pointer may be null with
+        // TIMER_ABSTIME.
+        let r = unsafe {
+            libc::clock_nanosleep(
+                libc::CLOCK_MONOTONIC,
+                libc::TIMER_ABSTIME,
+                &ts,
+                std::ptr::null_mut(),
+            )
+        };
+        if r != libc::EINTR {
+            return;
+        }
+    }
+}
+
+/// What the real-time set-up achieved.
+#[derive(Debug, Clone, Default)]
+pub struct RtReport {
+    /// Running at SCHED_FIFO.
+    pub fifo: bool,
+    /// Memory locked.
+    pub mlocked: bool,
+    /// Pinned to the requested CPU.
+    pub pinned: bool,
+    /// What was refused, one line each.
+    pub warnings: Vec<String>,
+}
+
+/// Asks for SCHED_FIFO at `priority` (1–99; 0 leaves the normal scheduler), `mlockall` when
+/// `lock_memory`, and affinity to `cpu` when given. Anything refused becomes a warning.
+pub fn setup(priority: u8, lock_memory: bool, cpu: Option<usize>) -> RtReport {
+    let mut r = RtReport::default();
+    if lock_memory {
+        // SAFETY: plain syscall with flag arguments.
+        let rc = unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) };
+        if rc == 0 {
+            r.mlocked = true;
+        } else {
+            r.warnings.push(format!(
+                "mlockall refused ({}); page faults may add latency (raise RLIMIT_MEMLOCK or run as root)",
+                io::Error::last_os_error()
+            ));
+        }
+    }
+    if let Some(cpu) = cpu {
+        let n = available_cpus();
+        if cpu >= n {
+            r.warnings.push(format!(
+                "CPU {cpu} does not exist here ({n} CPUs); not pinning"
+            ));
+        } else {
+            // SAFETY: cpu_set_t is plain data; CPU_SET indexes within its size (cpu < n).
+            let rc = unsafe {
+                let mut set: libc::cpu_set_t = std::mem::zeroed();
+                libc::CPU_SET(cpu, &mut set);
+                libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set)
+            };
+            if rc == 0 {
+                r.pinned = true;
+            } else {
+                r.warnings.push(format!(
+                    "pinning to CPU {cpu} refused ({})",
+                    io::Error::last_os_error()
+                ));
+            }
+        }
+    }
+    if priority > 0 {
+        let param = libc::sched_param {
+            sched_priority: i32::from(priority.min(99)),
+        };
+        // SAFETY: plain syscall on this process with a valid sched_param.
+        let rc = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) };
+        if rc == 0 {
+            r.fifo = true;
+        } else {
+            r.warnings.push(format!(
+                "SCHED_FIFO priority {priority} refused ({}); running at normal priority (needs CAP_SYS_NICE or root)",
+                io::Error::last_os_error()
+            ));
+        }
+    }
+    r
+}
+
+/// Number of CPUs this process may run on.
+pub fn available_cpus() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+/// Resident set size of a process (bytes), from /proc.
+pub fn resident_bytes(pid: u32) -> Option<u64> {
+    let s = std::fs::read_to_string(format!("/proc/{pid}/statm")).ok()?;
+    let pages: u64 = s.split_whitespace().nth(1)?.parse().ok()?;
+    // SAFETY: sysconf is a plain query.
+    let page = unsafe { libc::sysconf(libc::_SC_PAGESIZE) };
+    Some(pages * page.max(1) as u64)
+}
+
+/// Makes the calling process receive SIGTERM when its parent dies (so no board keeps running
+/// unsupervised), and exits at once if the parent is already gone. For `pre_exec`.
+pub fn die_with_parent(parent: libc::pid_t) -> io::Result<()> {
+    // SAFETY: prctl with PR_SET_PDEATHSIG and a signal number; getppid is a plain query.
+    unsafe {
+        if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM) != 0 {
+            return Err(io::Error::last_os_error());
+        }
+        if libc::getppid() != parent {
+            libc::_exit(0);
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Absolute sleeps never return early and the clock moves forward.
+    #[test]
+    fn sleep_until_reaches_the_deadline() {
+        let t0 = monotonic_ns();
+        let deadline = t0 + 2_000_000;
+        sleep_until(deadline);
+        assert!(monotonic_ns() >= deadline);
+        // A deadline in the past returns at once.
+        sleep_until(t0);
+    }
+}

@@ -1,0 +1,116 @@
+//! The force-sensor board: its own clock (default 7 kHz, like an ATI Net F/T), the latest world
+//! sample in, the sensor model ([`SensorModel`]: noise, bias, drift, low-pass, quantization,
+//! saturation) applied, one [`WrenchSample`] out per period.
+//!
+//! At start-up it takes its zero-load reading in free air (as the lockstep does) and sends it
+//! with every sample as the tare; when the first world sample arrives it lets its filter settle
+//! on it for 10 ms before publishing, as the lockstep does.
+
+use crate::ipc;
+use crate::rt;
+use afs_shared::msg::{self, PlantSample, WRENCH_SATURATED, WrenchSample};
+use afs_shared::sensor::SensorModel;
+use afs_shared::sensor::SensorParams;
+use anyhow::Result;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// How the sensor runs.
+#[derive(Debug, Clone)]
+pub struct SensorArgs {
+    /// Stack prefix.
+    pub prefix: String,
+    /// The sensor model.
+    pub params: SensorParams,
+    /// Noise seed.
+    pub seed: u64,
+    /// CPU to pin to.
+    pub cpu: Option<usize>,
+    /// SCHED_FIFO priority (0: normal).
+    pub priority: u8,
+}
+
+/// What the board did.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct SensorSummary {
+    /// Samples published.
+    pub published: u64,
+    /// Periods that woke a whole period late.
+    pub late: u64,
+}
+
+/// Runs until `stop` is set.
+pub fn run(args: &SensorArgs, stop: &AtomicBool) -> Result<SensorSummary> {
+    args.params.validate().map_err(anyhow::Error::msg)?;
+    let node = ipc::node(&args.prefix, "sensor")?;
+    let plant_sub = ipc::plant(&node)?
+        .subscriber_builder()
+        .buffer_size(64)
+        .create()
+        .map_err(|e| anyhow::anyhow!("plant subscriber: {e:?}"))?;
+    let publisher = ipc::wrench(&node)?
+        .publisher_builder()
+        .backpressure_strategy(ipc::BACKPRESSURE)
+        .create()
+        .map_err(|e| anyhow::anyhow!("wrench publisher: {e:?}"))?;
+    let mut model = SensorModel::new(args.params, args.seed);
+    let tare = afs_shared::sim::tare(&mut model);
+    let rtr = rt::setup(args.priority, true, args.cpu);
+    for w in &rtr.warnings {
+        eprintln!("afs-sensor: warning: {w}");
+    }
+    let period_ns = (1e9 / args.params.rate_hz).round() as u64;
+    let warm = (0.01 * args.params.rate_hz).ceil() as usize;
+    let epoch_ns = rt::monotonic_ns();
+    let mut latest: Option<PlantSample> = None;
+    let mut warmed = false;
+    let mut summary = SensorSummary::default();
+    let mut seq = 0u64;
+    let mut deadline = rt::monotonic_ns() + period_ns;
+    while !stop.load(Ordering::Relaxed) {
+        rt::sleep_until(deadline);
+        let now = rt::monotonic_ns();
+        if now >= deadline + period_ns {
+            summary.late += 1;
+        }
+        while let Ok(Some(s)) = plant_sub.receive() {
+            let p = *s.payload();
+            if p.version == msg::VERSION && latest.is_none_or(|l| p.seq >= l.seq) {
+                latest = Some(p);
+            }
+        }
+        if let Some(p) = latest {
+            if !warmed {
+                for _ in 0..warm {
+                    model.sample(p.sensor_wrench());
+                }
+                warmed = true;
+            }
+            let r = model.sample(p.sensor_wrench());
+            let mut w = WrenchSample {
+                version: msg::VERSION,
+                flags: if r.saturated { WRENCH_SATURATED } else { 0 },
+                seq,
+                epoch_ns,
+                plant_seq: p.seq,
+                plant_tick_ns: p.tick_ns,
+                sample_ns: now,
+                publish_ns: 0,
+                force_n: [r.wrench.force.x, r.wrench.force.y],
+                torque_nm: r.wrench.torque,
+                tare_force_n: [tare.force.x, tare.force.y],
+                tare_torque_nm: tare.torque,
+            };
+            w.publish_ns = rt::monotonic_ns();
+            if publisher.send_copy(w).is_ok() {
+                summary.published += 1;
+            }
+            seq += 1;
+        }
+        deadline += period_ns;
+        let now2 = rt::monotonic_ns();
+        if now2 > deadline + 100 * period_ns {
+            deadline = now2 + period_ns;
+        }
+    }
+    Ok(summary)
+}

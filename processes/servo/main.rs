@@ -1,0 +1,74 @@
+//! `afs-servo`: the plant/servo board (simulated world + 10 kHz fast loop).
+//!
+//! ```text
+//! afs-servo --prefix afs --scenario surface-tracking --cpu 1 --priority 80
+//! ```
+//! Normally started by `afs run`; it waits for `afs-sensor` with the same prefix.
+
+use afs::board::{Common, stop_flag};
+use afs::servo_board::{ServoArgs, ServoEnd, run};
+use clap::Parser;
+use std::process::ExitCode;
+
+/// The plant/servo board.
+#[derive(Parser)]
+#[command(name = "afs-servo", version)]
+struct Cli {
+    #[command(flatten)]
+    common: Common,
+    /// Simulated seconds to run (0: the scenario's own length).
+    #[arg(long, default_value_t = 0.0)]
+    duration: f64,
+    /// Resume the world from the supervisor's snapshot (after a restart).
+    #[arg(long)]
+    resume: bool,
+    /// Largest age of force data at use (ms) before the safe state.
+    #[arg(long, default_value_t = 2.0)]
+    max_force_age_ms: f64,
+    /// Seconds the estimator has to answer before the request is re-sent.
+    #[arg(long, default_value_t = 1.0)]
+    estimator_timeout: f64,
+    /// Sends of one request before keeping the old tangent.
+    #[arg(long, default_value_t = 10)]
+    estimator_attempts: u32,
+    /// Seconds to wait for the first force sample.
+    #[arg(long, default_value_t = 10.0)]
+    startup_timeout: f64,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = (|| {
+        if !(cli.duration.is_finite() && cli.duration >= 0.0) {
+            anyhow::bail!(
+                "--duration {} must be a number of seconds ≥ 0",
+                cli.duration
+            );
+        }
+        if !(cli.max_force_age_ms.is_finite() && cli.max_force_age_ms > 0.0) {
+            anyhow::bail!("--max-force-age-ms must be > 0");
+        }
+        let stop = stop_flag()?;
+        let args = ServoArgs {
+            prefix: cli.common.prefix.clone(),
+            scenario: cli.common.scenario.clone(),
+            base: cli.common.base()?,
+            duration_s: cli.duration,
+            cpu: cli.common.cpu,
+            priority: cli.common.priority,
+            resume: cli.resume,
+            max_force_age_ms: cli.max_force_age_ms,
+            estimator_timeout_s: cli.estimator_timeout,
+            estimator_attempts: cli.estimator_attempts,
+            startup_timeout_s: cli.startup_timeout,
+        };
+        run(&args, &stop)
+    })();
+    match result {
+        Ok(ServoEnd::Finished | ServoEnd::Stopped) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("afs-servo: error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}

@@ -1,0 +1,587 @@
+//! The plant/servo board: the simulated world and the fast loop at 10 kHz on absolute-time
+//! wake-ups.
+//!
+//! Each tick: wake, take the newest force sample through the watchdog gate, run the scenario
+//! driver and one [`ServoCore`] step, advance the plant, publish the world and the controller
+//! samples, move the estimator request along, keep the world snapshot, record the loop's
+//! timing. Nothing in the tick allocates, locks, logs or blocks: histograms, the request
+//! buffer and the probe record are allocated before the loop; iceoryx2 loans come from
+//! pre-mapped shared memory.
+
+use crate::ipc::{self, Svc};
+use crate::rt;
+use afs_shared::msg::{
+    self, LoopStats, Quantiles, SERVO_FORCE_VALID, STATS_MLOCKED, STATS_PINNED, STATS_SCHED_FIFO,
+    TangentRequestHeader, TangentResponse, WorldSnapshot,
+};
+use afs_shared::plant::{Plant, PlantState};
+use afs_shared::scenario::{self, DriverMemo, DriverState, Scenario};
+use afs_shared::servo::{ServoCore, ServoInput, ServoMode};
+use afs_shared::sim::SimConfig;
+use afs_shared::tangent::ProbeSample;
+use afs_shared::watchdog::{GateParams, SampleGate, Verdict};
+use anyhow::{Context, Result, bail};
+use hdrhistogram::Histogram;
+use iceoryx2::pending_response::PendingResponse;
+use iceoryx2::port::client::Client;
+use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::prelude::*;
+use iceoryx2::request_mut_uninit::RequestMutUninit;
+use std::mem::MaybeUninit;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// How the servo runs.
+#[derive(Debug, Clone)]
+pub struct ServoArgs {
+    /// Stack prefix.
+    pub prefix: String,
+    /// Scenario name.
+    pub scenario: String,
+    /// The set-up (already with the scenario's overrides applied by `Scenario::new`).
+    pub base: SimConfig,
+    /// Stop after this much simulated time (s); 0 runs the scenario to its end.
+    pub duration_s: f64,
+    /// CPU to pin to.
+    pub cpu: Option<usize>,
+    /// SCHED_FIFO priority (0: normal scheduling).
+    pub priority: u8,
+    /// Resume the world from the supervisor's snapshot (after a servo restart).
+    pub resume: bool,
+    /// Largest age of force data at use (ms).
+    pub max_force_age_ms: f64,
+    /// Time the estimator has to answer before a request is re-sent (s).
+    pub estimator_timeout_s: f64,
+    /// Sends of one request before giving up and keeping the old tangent.
+    pub estimator_attempts: u32,
+    /// Time to wait for the first force sample (s).
+    pub startup_timeout_s: f64,
+}
+
+/// How the servo ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ServoEnd {
+    /// The scenario reached its end or its duration.
+    Finished,
+    /// Asked to stop (SIGINT/SIGTERM).
+    Stopped,
+}
+
+type TangentClient = Client<Svc, [ProbeSample], TangentRequestHeader, TangentResponse, ()>;
+type TangentLoan =
+    RequestMutUninit<Svc, [MaybeUninit<ProbeSample>], TangentRequestHeader, TangentResponse, ()>;
+type TangentPending =
+    PendingResponse<Svc, [ProbeSample], TangentRequestHeader, TangentResponse, ()>;
+
+/// Samples copied into a request per tick: about 57 kB, a few microseconds.
+const COPY_PER_TICK: usize = 1024;
+
+enum Link {
+    Idle,
+    Copying {
+        loan: TangentLoan,
+        next: usize,
+    },
+    Waiting {
+        pending: TangentPending,
+        sent_ns: u64,
+    },
+}
+
+/// The servo's side of the estimator service: copies the probe record into a loaned request
+/// over several ticks, sends it, waits, re-sends after a time-out, gives up after the last
+/// attempt.
+struct EstimatorLink {
+    client: TangentClient,
+    state: Link,
+    request_id: u64,
+    attempt: u32,
+    timeout_ns: u64,
+    attempts: u32,
+    requests: u64,
+    retries: u64,
+    answers: u64,
+}
+
+impl EstimatorLink {
+    fn tick(&mut self, servo: &mut ServoCore, now_ns: u64) {
+        if servo.mode() != ServoMode::AwaitingEstimate {
+            self.state = Link::Idle;
+            self.attempt = 0;
+            return;
+        }
+        let state = std::mem::replace(&mut self.state, Link::Idle);
+        self.state = match state {
+            Link::Idle => {
+                let Some(req) = servo.pending_probe() else {
+                    return;
+                };
+                if self.attempt == 0 {
+                    self.request_id += 1;
+                }
+                let len = req.samples.len().min(ipc::MAX_PROBE_SAMPLES);
+                match self.client.loan_slice_uninit(len) {
+                    Ok(mut loan) => {
+                        let tangent = servo.params().tangent;
+                        *loan.user_header_mut() = TangentRequestHeader {
+                            version: msg::VERSION,
+                            reprobe: u32::from(req.reprobe),
+                            request_id: self.request_id,
+                            attempt: self.attempt,
+                            reserved: 0,
+                            publish_ns: 0,
+                            base_angle_rad: req.base_angle,
+                            plan: req.plan.into(),
+                            params: (&tangent).into(),
+                        };
+                        Link::Copying { loan, next: 0 }
+                    }
+                    // No memory to loan (should not happen: static allocation): try next tick.
+                    Err(_) => Link::Idle,
+                }
+            }
+            Link::Copying { mut loan, next } => {
+                let Some(req) = servo.pending_probe() else {
+                    return;
+                };
+                let dst = loan.payload_mut();
+                let end = (next + COPY_PER_TICK).min(dst.len());
+                for (d, s) in dst[next..end].iter_mut().zip(&req.samples[next..end]) {
+                    d.write(*s);
+                }
+                if end < dst.len() {
+                    Link::Copying { loan, next: end }
+                } else {
+                    loan.user_header_mut().publish_ns = rt::monotonic_ns();
+                    // SAFETY: every element of the slice was written above.
+                    let request = unsafe { loan.assume_init() };
+                    match request.send() {
+                        Ok(pending) => {
+                            self.requests += 1;
+                            Link::Waiting {
+                                pending,
+                                sent_ns: now_ns,
+                            }
+                        }
+                        Err(_) => Link::Idle,
+                    }
+                }
+            }
+            Link::Waiting { pending, sent_ns } => {
+                let mut answer = None;
+                while let Ok(Some(r)) = pending.receive() {
+                    if r.payload().request_id == self.request_id {
+                        answer = Some(*r.payload());
+                    }
+                }
+                if let Some(a) = answer {
+                    self.answers += 1;
+                    self.attempt = 0;
+                    match a.to_outcome() {
+                        Some(o) => servo.apply_tangent_outcome(&o),
+                        // The estimator refused the request: nothing to learn from it.
+                        None => servo.give_up_estimate(),
+                    }
+                    Link::Idle
+                } else if now_ns.saturating_sub(sent_ns) > self.timeout_ns {
+                    self.attempt += 1;
+                    self.retries += 1;
+                    if self.attempt >= self.attempts {
+                        self.attempt = 0;
+                        servo.give_up_estimate();
+                    }
+                    Link::Idle
+                } else {
+                    Link::Waiting { pending, sent_ns }
+                }
+            }
+        };
+    }
+}
+
+/// Latency histograms, allocated before the loop; recording never allocates.
+struct Timing {
+    wake: Histogram<u64>,
+    exec: Histogram<u64>,
+    age: Histogram<u64>,
+}
+
+/// Largest value the histograms hold (ns); larger ones are recorded as this.
+const HIST_MAX_NS: u64 = 1_000_000_000;
+
+impl Timing {
+    fn new() -> Result<Self> {
+        let h = || Histogram::<u64>::new_with_bounds(1, HIST_MAX_NS, 2).context("histogram");
+        Ok(Self {
+            wake: h()?,
+            exec: h()?,
+            age: h()?,
+        })
+    }
+}
+
+fn quantiles(h: &Histogram<u64>) -> Quantiles {
+    if h.is_empty() {
+        return Quantiles::default();
+    }
+    Quantiles {
+        p50: h.value_at_quantile(0.5),
+        p90: h.value_at_quantile(0.9),
+        p99: h.value_at_quantile(0.99),
+        p999: h.value_at_quantile(0.999),
+        p9999: h.value_at_quantile(0.9999),
+        max: h.max(),
+    }
+}
+
+fn record(h: &mut Histogram<u64>, v: u64) {
+    let _ = h.record(v.clamp(1, HIST_MAX_NS));
+}
+
+/// Runs the board until the scenario ends, the duration passes or `stop` is set.
+pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
+    let scenario = Scenario::new(&args.scenario, &args.base).map_err(anyhow::Error::msg)?;
+    let cfg = &scenario.cfg;
+    let dt = cfg.servo.dt();
+    let period_ns = (dt * 1e9).round() as u64;
+    let duration = if args.duration_s > 0.0 {
+        args.duration_s.min(scenario.natural_duration_s)
+    } else {
+        scenario.natural_duration_s
+    };
+
+    let node = ipc::node(&args.prefix, "servo")?;
+    let plant_pub = ipc::plant(&node)?
+        .publisher_builder()
+        .backpressure_strategy(ipc::BACKPRESSURE)
+        .create()
+        .map_err(|e| anyhow::anyhow!("plant publisher: {e:?}"))?;
+    let servo_pub = ipc::servo(&node)?
+        .publisher_builder()
+        .backpressure_strategy(ipc::BACKPRESSURE)
+        .create()
+        .map_err(|e| anyhow::anyhow!("servo publisher: {e:?}"))?;
+    let stats_pub = ipc::loop_stats(&node)?
+        .publisher_builder()
+        .create()
+        .map_err(|e| anyhow::anyhow!("loop-stats publisher: {e:?}"))?;
+    let wrench_sub = ipc::wrench(&node)?
+        .subscriber_builder()
+        .buffer_size(256)
+        .create()
+        .map_err(|e| anyhow::anyhow!("wrench subscriber: {e:?}"))?;
+    let client = ipc::tangent(&node)?
+        .client_builder()
+        .initial_max_slice_len(ipc::MAX_PROBE_SAMPLES)
+        .allocation_strategy(AllocationStrategy::Static)
+        .create()
+        .map_err(|e| anyhow::anyhow!("tangent client: {e:?}"))?;
+    let world = ipc::open_world(&node);
+    if world.is_none() {
+        eprintln!(
+            "afs-servo: warning: no world blackboard (not started by `afs run`?); a restart will start the world afresh"
+        );
+    }
+    let world_writer = match &world {
+        Some(w) => Some(
+            w.writer_builder()
+                .create()
+                .map_err(|e| anyhow::anyhow!("world writer: {e:?}"))?,
+        ),
+        None => None,
+    };
+    let world_entry = match &world_writer {
+        Some(w) => Some(
+            w.entry::<WorldSnapshot>(&0)
+                .map_err(|e| anyhow::anyhow!("world entry: {e:?}"))?,
+        ),
+        None => None,
+    };
+
+    // The world: fresh, or where the last servo left it.
+    let q0 = cfg.start_configuration().map_err(anyhow::Error::msg)?;
+    let mut plant = Plant::new(cfg.plant.clone(), cfg.surface.clone(), q0);
+    let mut snapshot = None;
+    if args.resume
+        && let Some(w) = &world
+    {
+        let reader = w
+            .reader_builder()
+            .create()
+            .map_err(|e| anyhow::anyhow!("world reader: {e:?}"))?;
+        let s = *reader
+            .entry::<WorldSnapshot>(&0)
+            .map_err(|e| anyhow::anyhow!("world entry: {e:?}"))?
+            .get();
+        if s.version == msg::VERSION {
+            let face = |f: u64| usize::try_from(f).unwrap_or(usize::MAX);
+            plant.restore(&PlantState {
+                time_s: s.time_s,
+                q: s.q_rad,
+                qd: s.qd_rad_per_s,
+                friction: [
+                    (face(s.friction_face[0]), s.friction_deflection_m[0]),
+                    (face(s.friction_face[1]), s.friction_deflection_m[1]),
+                ],
+            });
+            snapshot = Some(s);
+        }
+    }
+    let mut seq = snapshot.map_or(0, |s| s.seq + 1);
+    let tangent0 = snapshot.map_or(
+        cfg.surface.tangent_angle_at(cfg.start_u_m) + cfg.tangent_error_rad,
+        |s| s.tangent_angle_rad,
+    );
+
+    // Publish the world until the sensor answers.
+    let mut gate = SampleGate::new(GateParams {
+        max_age_ns: (args.max_force_age_ms * 1e6) as u64,
+        force_limit_n: cfg.sensor.range_force_n,
+        torque_limit_nm: cfg.sensor.range_torque_nm,
+        ..GateParams::default()
+    });
+    // The world's first sample, published once (a sensor that connects later gets it as the
+    // service's history); every later sample has the next sequence number.
+    let t_wait = rt::monotonic_ns();
+    let mut p0 = scenario::plant_sample(plant.truth(), seq, t_wait);
+    p0.publish_ns = rt::monotonic_ns();
+    let _ = plant_pub.send_copy(p0);
+    seq += 1;
+    let mut next = t_wait;
+    let first = loop {
+        if stop.load(Ordering::Relaxed) {
+            return Ok(ServoEnd::Stopped);
+        }
+        let now = rt::monotonic_ns();
+        let _ = plant_pub.update_connections();
+        while let Ok(Some(s)) = wrench_sub.receive() {
+            gate.offer(s.payload(), now);
+        }
+        if let Ok((w, _)) = gate.current(now) {
+            break w;
+        }
+        if now - t_wait > (args.startup_timeout_s * 1e9) as u64 {
+            bail!(
+                "no force data within {:.1} s; is afs-sensor running with --prefix {}?",
+                args.startup_timeout_s,
+                args.prefix
+            );
+        }
+        next += period_ns;
+        rt::sleep_until(next);
+    };
+    let mut wrench0 = first.wrench();
+    wrench0.force -= first.tare().force;
+    wrench0.torque -= first.tare().torque;
+    let (q, _) = plant.joints();
+    let mut servo = ServoCore::new(
+        cfg.servo,
+        cfg.plant.arm,
+        cfg.plant.elbow,
+        q,
+        wrench0,
+        tangent0,
+    )
+    .map_err(anyhow::Error::msg)?;
+    servo.set_tare(first.tare());
+    let mut driver = scenario.driver();
+    if let Some(s) = snapshot {
+        driver.resume(
+            s.time_s,
+            s.velocity_m_per_s,
+            s.a_omega_m_per_s,
+            DriverMemo {
+                leg: (s.driver_leg != u32::MAX).then_some(s.driver_leg),
+                leg_start_s: s.driver_leg_start[0],
+                leg_start_u: s.driver_leg_start[1],
+            },
+            &mut servo,
+        );
+    }
+    let mut link = EstimatorLink {
+        client,
+        state: Link::Idle,
+        request_id: 0,
+        attempt: 0,
+        timeout_ns: (args.estimator_timeout_s * 1e9) as u64,
+        attempts: args.estimator_attempts.max(1),
+        requests: 0,
+        retries: 0,
+        answers: 0,
+    };
+    let mut timing = Timing::new()?;
+    let rtr = rt::setup(args.priority, true, args.cpu);
+    for w in &rtr.warnings {
+        eprintln!("afs-servo: warning: {w}");
+    }
+    let flags = (if rtr.fifo { STATS_SCHED_FIFO } else { 0 })
+        | (if rtr.mlocked { STATS_MLOCKED } else { 0 })
+        | (if rtr.pinned { STATS_PINNED } else { 0 });
+
+    let mut stats = LoopStats {
+        version: msg::VERSION,
+        flags,
+        period_ns,
+        ..Default::default()
+    };
+    let mut safe_reason = 0u32;
+    let mut last_tare = first.tare();
+    let start_ns = rt::monotonic_ns() + period_ns;
+    let mut deadline = start_ns;
+    let mut end = ServoEnd::Finished;
+    loop {
+        rt::sleep_until(deadline);
+        let now = rt::monotonic_ns();
+        let late = now.saturating_sub(deadline);
+        if stop.load(Ordering::Relaxed) {
+            end = ServoEnd::Stopped;
+            break;
+        }
+        // Force data through the gate.
+        while let Ok(Some(s)) = wrench_sub.receive() {
+            gate.offer(s.payload(), now);
+        }
+        let current = gate.current(now);
+        let (q, qd) = plant.joints();
+        let mut input = ServoInput {
+            q,
+            qd,
+            ..Default::default()
+        };
+        let mut used = None;
+        match current {
+            Ok((w, age)) => {
+                input.wrench = w.wrench();
+                input.force_valid = true;
+                let tare = w.tare();
+                if tare != last_tare {
+                    servo.set_tare(tare);
+                    last_tare = tare;
+                }
+                record(&mut timing.age, age);
+                used = Some((w, age));
+            }
+            Err(v) => {
+                if v == Verdict::Stale {
+                    stats.stale_ticks += 1;
+                }
+                if !servo.is_safe() {
+                    safe_reason = v as u32;
+                }
+            }
+        }
+        // Scenario, control, world.
+        let t = plant.time();
+        if t >= duration
+            || driver.step(t, plant.truth().surface_u_m, &mut servo) == DriverState::Done
+        {
+            break;
+        }
+        let tau = servo.step(&input, dt);
+        plant.step(tau, dt);
+        if servo.is_safe() {
+            stats.safe_ticks += 1;
+        }
+
+        // Publish the tick.
+        let mut p = scenario::plant_sample(plant.truth(), seq, now);
+        let mut s = scenario::servo_sample(&servo, seq, now, plant.time());
+        s.safe_reason = safe_reason;
+        if let Some((w, age)) = used {
+            s.flags |= SERVO_FORCE_VALID;
+            s.wrench_seq = w.seq;
+            s.wrench_sample_ns = w.sample_ns;
+            s.force_age_ns = age;
+        }
+        p.publish_ns = rt::monotonic_ns();
+        if plant_pub.send_copy(p).is_err() {
+            stats.publish_failures += 1;
+        }
+        s.publish_ns = rt::monotonic_ns();
+        if servo_pub.send_copy(s).is_err() {
+            stats.publish_failures += 1;
+        }
+        link.tick(&mut servo, now);
+        if let Some(e) = &world_entry {
+            e.update_with_copy(snapshot_of(&plant, &servo, &driver, seq));
+        }
+
+        // Loop statistics.
+        let exec = rt::monotonic_ns().saturating_sub(now);
+        record(&mut timing.wake, late);
+        record(&mut timing.exec, exec);
+        stats.ticks += 1;
+        if late >= period_ns || exec >= period_ns {
+            stats.misses += 1;
+        }
+        if stats.ticks.is_multiple_of(1000) {
+            publish_stats(&mut stats, &timing, &gate, &link, &servo, &stats_pub);
+        }
+        seq += 1;
+        deadline += period_ns;
+        // Far behind (stopped in a debugger, machine suspended): re-anchor instead of
+        // running a burst of ticks back to back.
+        let now2 = rt::monotonic_ns();
+        if now2 > deadline + 100 * period_ns {
+            deadline = now2 + period_ns;
+        }
+    }
+    publish_stats(&mut stats, &timing, &gate, &link, &servo, &stats_pub);
+    Ok(end)
+}
+
+fn snapshot_of(
+    plant: &Plant,
+    servo: &ServoCore,
+    driver: &scenario::ScenarioDriver,
+    seq: u64,
+) -> WorldSnapshot {
+    let st = plant.state();
+    let memo = driver.memo();
+    let face = |f: usize| u64::try_from(f).unwrap_or(u64::MAX);
+    // The velocity and Aω to restore are the ones in force outside any estimation or safe
+    // state: what the servo would go back to.
+    let d = servo.diag();
+    WorldSnapshot {
+        version: msg::VERSION,
+        driver_leg: memo.leg.unwrap_or(u32::MAX),
+        seq,
+        time_s: st.time_s,
+        q_rad: st.q,
+        qd_rad_per_s: st.qd,
+        friction_face: [face(st.friction[0].0), face(st.friction[1].0)],
+        friction_deflection_m: [st.friction[0].1, st.friction[1].1],
+        tangent_angle_rad: d.tangent_angle_rad,
+        a_omega_m_per_s: servo.resume_a_omega(),
+        velocity_m_per_s: servo.resume_velocity(),
+        driver_leg_start: [memo.leg_start_s, memo.leg_start_u],
+    }
+}
+
+fn publish_stats(
+    stats: &mut LoopStats,
+    timing: &Timing,
+    gate: &SampleGate,
+    link: &EstimatorLink,
+    servo: &ServoCore,
+    publisher: &iceoryx2::port::publisher::Publisher<Svc, LoopStats, ()>,
+) {
+    let c = gate.counters();
+    stats.seq += 1;
+    stats.wake_latency = quantiles(&timing.wake);
+    stats.exec = quantiles(&timing.exec);
+    stats.force_age = quantiles(&timing.age);
+    stats.bad_non_finite = c.non_finite;
+    stats.bad_out_of_range = c.out_of_range;
+    stats.bad_seq_repeat = c.seq_repeat;
+    stats.bad_seq_backwards = c.seq_backwards;
+    stats.bad_future = c.future;
+    stats.bad_version = c.version;
+    stats.safe_entries = servo.counters().safe_entries as u64;
+    stats.requests = link.requests;
+    stats.retries = link.retries;
+    stats.answers = link.answers;
+    stats.publish_ns = rt::monotonic_ns();
+    if publisher.send_copy(*stats).is_err() {
+        stats.publish_failures += 1;
+    }
+}

@@ -1,0 +1,1149 @@
+//! `afs run`: launches the process graph of a stack file, watches it, restarts what dies,
+//! records, and reports the scenario's figures against the lockstep reference.
+//!
+//! The supervisor owns the world blackboard (so a restarted servo resumes the world) and
+//! consumes the plant and servo streams: it joins them by tick, feeds the same
+//! [`ScenarioMonitor`] the lockstep reference uses, and forwards every sample to the recorder.
+//! Children get SIGTERM if the supervisor dies (`PR_SET_PDEATHSIG`); a supervisor that finds a
+//! dead stack's resources under its prefix removes them before starting.
+
+use crate::ipc::{self, Svc};
+use crate::record::{Rec, RecordSummary, Recorder};
+use crate::rt;
+use afs_shared::msg::{
+    self, FRICTION_LAW_VALID, FRICTION_MU_VALID, FrictionReport, LoopStats, PlantSample,
+    ProcessStatus, ServoSample, SupervisorStatus, fixed_str,
+};
+use afs_shared::scenario::{self, Agreement, Scenario, ScenarioReport};
+use afs_shared::sim::SimConfig;
+use anyhow::{Context, Result, bail};
+use serde::{Deserialize, Serialize};
+use serde_json::{Value, json};
+use std::collections::VecDeque;
+use std::io::IsTerminal;
+use std::os::unix::process::{CommandExt, ExitStatusExt};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+/// The built-in stack file.
+pub const DEFAULT_STACK: &str = include_str!("../examples/stack.toml");
+
+/// When to restart a process that ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Restart {
+    /// Whatever the exit.
+    Always,
+    /// Unless it exited with status 0.
+    OnFailure,
+    /// Never.
+    Never,
+}
+
+fn default_restarts() -> u32 {
+    5
+}
+fn default_backoff() -> u64 {
+    50
+}
+fn default_restart() -> Restart {
+    Restart::OnFailure
+}
+
+/// One process of the graph.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProcessSpec {
+    /// Name (servo, sensor and estimator have their roles; others are just supervised).
+    pub name: String,
+    /// Executable: a path, or a name looked up next to the `afs` executable.
+    pub binary: String,
+    /// Extra arguments.
+    #[serde(default)]
+    pub args: Vec<String>,
+    /// CPU to pin to.
+    #[serde(default)]
+    pub cpu: Option<usize>,
+    /// SCHED_FIFO priority (0: normal).
+    #[serde(default)]
+    pub priority: u8,
+    /// Restart policy.
+    #[serde(default = "default_restart")]
+    pub restart: Restart,
+    /// Most restarts before giving up.
+    #[serde(default = "default_restarts")]
+    pub max_restarts: u32,
+    /// First restart delay (ms), doubling up to 2 s.
+    #[serde(default = "default_backoff")]
+    pub backoff_ms: u64,
+    /// Alive but silent this long (ms) → killed and restarted (0: never).
+    #[serde(default)]
+    pub stall_ms: u64,
+}
+
+/// A stack file.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct StackFile {
+    /// Stack prefix.
+    pub prefix: String,
+    /// Scenario.
+    pub scenario: String,
+    /// Simulated seconds (0: the scenario's own length).
+    pub duration_s: f64,
+    /// Noise seed.
+    pub seed: u64,
+    /// SimConfig overrides.
+    #[serde(default)]
+    pub sim: Option<toml::Table>,
+    /// The processes.
+    pub process: Vec<ProcessSpec>,
+}
+
+impl StackFile {
+    /// Parses and checks a stack file's text (`origin` names it in errors).
+    pub fn parse(text: &str, origin: &str) -> Result<Self> {
+        let s: StackFile =
+            toml::from_str(text).with_context(|| format!("parsing stack file {origin}"))?;
+        s.check().with_context(|| format!("stack file {origin}"))?;
+        Ok(s)
+    }
+
+    fn check(&self) -> Result<()> {
+        ipc::check_prefix(&self.prefix)?;
+        scenario::ScenarioKind::from_name(&self.scenario).map_err(anyhow::Error::msg)?;
+        if !(self.duration_s.is_finite() && (0.0..=86_400.0).contains(&self.duration_s)) {
+            bail!(
+                "duration_s = {} must be a number of seconds in [0, 86400] (0: the scenario's own length)",
+                self.duration_s
+            );
+        }
+        if self.process.is_empty() || self.process.len() > msg::MAX_PROCESSES {
+            bail!(
+                "needs 1 to {} [[process]] tables, found {}",
+                msg::MAX_PROCESSES,
+                self.process.len()
+            );
+        }
+        for (i, p) in self.process.iter().enumerate() {
+            if p.name.is_empty() || p.name.len() > 15 {
+                bail!("process {i}: name must be 1 to 15 characters");
+            }
+            if self.process[..i].iter().any(|q| q.name == p.name) {
+                bail!("process '{}' is listed twice", p.name);
+            }
+            if p.priority > 99 {
+                bail!(
+                    "process '{}': priority {} must be 0 to 99",
+                    p.name,
+                    p.priority
+                );
+            }
+        }
+        for role in ["servo", "sensor"] {
+            if !self.process.iter().any(|p| p.name == role) {
+                bail!("the graph needs a process named '{role}'");
+            }
+        }
+        Ok(())
+    }
+
+    /// The simulated set-up: defaults with the `[sim]` overrides.
+    pub fn sim_config(&self) -> Result<SimConfig> {
+        let mut cfg: SimConfig = match &self.sim {
+            Some(t) => t
+                .clone()
+                .try_into()
+                .context("the [sim] table (see `afs experiment --config`)")?,
+            None => SimConfig::default(),
+        };
+        cfg.seed = self.seed;
+        cfg.validate()
+            .map_err(|e| anyhow::anyhow!("the [sim] table: {e}"))?;
+        Ok(cfg)
+    }
+}
+
+/// What `afs run` was asked.
+#[derive(Debug, Clone, Default)]
+pub struct RunOptions {
+    /// Stack file (None: the built-in one).
+    pub config: Option<PathBuf>,
+    /// Overrides.
+    pub scenario: Option<String>,
+    /// Override (s).
+    pub duration: Option<f64>,
+    /// Override.
+    pub prefix: Option<String>,
+    /// Override.
+    pub seed: Option<u64>,
+    /// Record every topic to this MCAP file.
+    pub record: Option<PathBuf>,
+    /// Print a progress line every second on stderr.
+    pub progress: bool,
+}
+
+/// Loads the stack file with the overrides applied.
+pub fn load_stack(opts: &RunOptions) -> Result<StackFile> {
+    let mut s = match &opts.config {
+        Some(p) => {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("reading stack file {}", p.display()))?;
+            StackFile::parse(&text, &p.display().to_string())?
+        }
+        None => StackFile::parse(DEFAULT_STACK, "(built-in)")?,
+    };
+    if let Some(x) = &opts.scenario {
+        s.scenario = x.clone();
+    }
+    if let Some(x) = opts.duration {
+        s.duration_s = x;
+    }
+    if let Some(x) = &opts.prefix {
+        s.prefix = x.clone();
+    }
+    if let Some(x) = opts.seed {
+        s.seed = x;
+    }
+    s.check()?;
+    Ok(s)
+}
+
+fn resolve_binary(name: &str) -> Result<PathBuf> {
+    let p = Path::new(name);
+    if p.components().count() > 1 {
+        if p.is_file() {
+            return Ok(p.to_path_buf());
+        }
+        bail!("binary {} does not exist", p.display());
+    }
+    let exe = std::env::current_exe().context("locating the afs executable")?;
+    let dir = exe.parent().unwrap_or(Path::new("."));
+    let cand = dir.join(name);
+    if cand.is_file() {
+        return Ok(cand);
+    }
+    bail!(
+        "binary '{name}' not found next to {} (build it with `cargo build --release`)",
+        exe.display()
+    )
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum ProcState {
+    Running,
+    Waiting,
+    Exited,
+    Failed,
+}
+
+#[derive(Debug, Clone, Serialize)]
+struct ExitRecord {
+    at_s: f64,
+    status: String,
+    restarted: bool,
+}
+
+struct Proc {
+    spec: ProcessSpec,
+    path: PathBuf,
+    child: Option<Child>,
+    state: ProcState,
+    restarts: u32,
+    restart_at: Option<Instant>,
+    last_exit: Option<i32>,
+    exits: Vec<ExitRecord>,
+    started: Instant,
+    stalls: u32,
+}
+
+fn exit_code(st: &std::process::ExitStatus) -> i32 {
+    st.code().unwrap_or_else(|| -st.signal().unwrap_or(0))
+}
+
+fn describe(st: &std::process::ExitStatus) -> String {
+    match (st.code(), st.signal()) {
+        (Some(c), _) => format!("exit {c}"),
+        (None, Some(s)) => format!("signal {s}"),
+        _ => "unknown".into(),
+    }
+}
+
+struct Launch<'a> {
+    prefix: &'a str,
+    scenario: &'a str,
+    seed: u64,
+    sim_file: Option<&'a Path>,
+    duration: f64,
+}
+
+impl Proc {
+    fn spawn(&mut self, l: &Launch<'_>, resume: bool) -> Result<()> {
+        let mut cmd = Command::new(&self.path);
+        cmd.args(["--prefix", l.prefix, "--scenario", l.scenario])
+            .args(["--seed", &l.seed.to_string()]);
+        if let Some(f) = l.sim_file {
+            cmd.arg("--sim-config").arg(f);
+        }
+        if let Some(c) = self.spec.cpu {
+            cmd.args(["--cpu", &c.to_string()]);
+        }
+        cmd.args(["--priority", &self.spec.priority.to_string()]);
+        if self.spec.name == "servo" {
+            cmd.args(["--duration", &l.duration.to_string()]);
+            if resume {
+                cmd.arg("--resume");
+            }
+        }
+        cmd.args(&self.spec.args);
+        cmd.stdin(Stdio::null()).stdout(Stdio::null());
+        // SAFETY: getpid is async-signal-safe; the closure only calls prctl/getppid/_exit.
+        let parent = unsafe { libc::getpid() };
+        unsafe {
+            cmd.pre_exec(move || rt::die_with_parent(parent));
+        }
+        let child = cmd
+            .spawn()
+            .with_context(|| format!("starting {} ({})", self.spec.name, self.path.display()))?;
+        self.child = Some(child);
+        self.state = ProcState::Running;
+        self.started = Instant::now();
+        Ok(())
+    }
+
+    fn pid(&self) -> i32 {
+        self.child.as_ref().map_or(0, |c| c.id() as i32)
+    }
+
+    fn signal(&self, sig: i32) {
+        if let Some(c) = &self.child {
+            // SAFETY: kill on our own child's pid.
+            unsafe {
+                libc::kill(c.id() as i32, sig);
+            }
+        }
+    }
+
+    /// Stops the process: SIGTERM, then SIGKILL after `grace`. Reaps it.
+    fn stop(&mut self, grace: Duration) {
+        let Some(mut c) = self.child.take() else {
+            return;
+        };
+        // SAFETY: kill on our own child's pid.
+        unsafe {
+            libc::kill(c.id() as i32, libc::SIGTERM);
+        }
+        let t0 = Instant::now();
+        loop {
+            match c.try_wait() {
+                Ok(Some(st)) => {
+                    self.last_exit = Some(exit_code(&st));
+                    break;
+                }
+                Ok(None) if t0.elapsed() < grace => std::thread::sleep(Duration::from_millis(5)),
+                _ => {
+                    let _ = c.kill();
+                    if let Ok(st) = c.wait() {
+                        self.last_exit = Some(exit_code(&st));
+                    }
+                    break;
+                }
+            }
+        }
+        self.state = ProcState::Exited;
+    }
+}
+
+/// Joins the plant and servo streams by tick and counts what was lost or out of order.
+#[derive(Debug, Default)]
+struct Joiner {
+    plant: VecDeque<PlantSample>,
+    servo: VecDeque<ServoSample>,
+    last_plant: Option<u64>,
+    last_servo: Option<u64>,
+    plant_received: u64,
+    servo_received: u64,
+    plant_gaps: u64,
+    plant_lost: u64,
+    servo_lost: u64,
+    reordered: u64,
+    paired: u64,
+    max_gap_ticks: u64,
+}
+
+impl Joiner {
+    fn push_plant(&mut self, p: PlantSample) {
+        self.plant_received += 1;
+        if let Some(l) = self.last_plant {
+            if p.seq <= l {
+                self.reordered += 1;
+                return;
+            }
+            if p.seq > l + 1 {
+                self.plant_gaps += 1;
+                self.plant_lost += p.seq - l - 1;
+                self.max_gap_ticks = self.max_gap_ticks.max(p.seq - l - 1);
+            }
+        }
+        self.last_plant = Some(p.seq);
+        self.plant.push_back(p);
+    }
+
+    fn push_servo(&mut self, s: ServoSample) {
+        self.servo_received += 1;
+        if let Some(l) = self.last_servo {
+            if s.seq <= l {
+                self.reordered += 1;
+                return;
+            }
+            if s.seq > l + 1 {
+                self.servo_lost += s.seq - l - 1;
+            }
+        }
+        self.last_servo = Some(s.seq);
+        self.servo.push_back(s);
+    }
+
+    fn pairs(&mut self, mut f: impl FnMut(&PlantSample, &ServoSample)) {
+        while let (Some(p), Some(s)) = (self.plant.front(), self.servo.front()) {
+            if p.seq == s.seq {
+                f(p, s);
+                self.paired += 1;
+                self.plant.pop_front();
+                self.servo.pop_front();
+            } else if p.seq < s.seq {
+                self.plant.pop_front();
+            } else {
+                self.servo.pop_front();
+            }
+        }
+    }
+}
+
+/// The outcome of `afs run`.
+pub struct RunOutcome {
+    /// The JSON report.
+    pub report: Value,
+    /// All checks passed.
+    pub passed: bool,
+}
+
+fn quantiles_us(q: &msg::Quantiles) -> Value {
+    let us = |v: u64| v as f64 / 1000.0;
+    json!({
+        "p50": us(q.p50), "p90": us(q.p90), "p99": us(q.p99), "p99_9": us(q.p999),
+        "p99_99": us(q.p9999), "max": us(q.max),
+    })
+}
+
+/// The loop statistics as JSON (µs).
+pub fn loop_stats_json(s: &LoopStats) -> Value {
+    json!({
+        "ticks": s.ticks,
+        "period_us": s.period_ns as f64 / 1000.0,
+        "misses": s.misses,
+        "sched_fifo": s.flags & msg::STATS_SCHED_FIFO != 0,
+        "mlocked": s.flags & msg::STATS_MLOCKED != 0,
+        "pinned": s.flags & msg::STATS_PINNED != 0,
+        "wake_jitter_us": quantiles_us(&s.wake_latency),
+        "exec_us": quantiles_us(&s.exec),
+        "force_age_us": quantiles_us(&s.force_age),
+        "bad_samples": {
+            "non_finite": s.bad_non_finite, "out_of_range": s.bad_out_of_range,
+            "seq_repeat": s.bad_seq_repeat, "seq_backwards": s.bad_seq_backwards,
+            "future": s.bad_future, "version": s.bad_version,
+        },
+        "stale_ticks": s.stale_ticks,
+        "safe_entries": s.safe_entries,
+        "safe_ticks": s.safe_ticks,
+        "estimator": {"requests": s.requests, "retries": s.retries, "answers": s.answers},
+        "publish_failures": s.publish_failures,
+    })
+}
+
+fn friction_json(f: &FrictionReport) -> Value {
+    let num = |v: f64| if v.is_finite() { json!(v) } else { Value::Null };
+    json!({
+        "windows": f.windows,
+        "speeds": f.speeds,
+        "mu_valid": f.status & FRICTION_MU_VALID != 0,
+        "law_valid": f.status & FRICTION_LAW_VALID != 0,
+        "mu": num(f.mu),
+        "mu_std": num(f.mu_std),
+        "kinetic_n": num(f.kinetic_n),
+        "viscous_n_s_per_m": num(f.viscous_n_s_per_m),
+        "stribeck_n": num(f.stribeck_n),
+        "stribeck_velocity_m_per_s": num(f.stribeck_velocity_m_per_s),
+        "rms_residual_n": num(f.rms_residual_n),
+    })
+}
+
+struct Check {
+    name: String,
+    value: f64,
+    relation: &'static str,
+    limit: f64,
+}
+
+impl Check {
+    fn pass(&self) -> bool {
+        match self.relation {
+            "<=" => self.value <= self.limit,
+            ">=" => self.value >= self.limit,
+            _ => self.value == self.limit,
+        }
+    }
+}
+
+/// Runs a stack until its scenario ends, it is stopped, or it fails.
+pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunOutcome> {
+    let stack = load_stack(opts)?;
+    let base = stack.sim_config()?;
+    let scenario = Scenario::new(&stack.scenario, &base).map_err(anyhow::Error::msg)?;
+    let duration = if stack.duration_s > 0.0 {
+        stack.duration_s.min(scenario.natural_duration_s)
+    } else {
+        scenario.natural_duration_s
+    };
+    let prefix = stack.prefix.clone();
+    let mut procs = Vec::new();
+    for spec in &stack.process {
+        procs.push(Proc {
+            path: resolve_binary(&spec.binary)?,
+            spec: spec.clone(),
+            child: None,
+            state: ProcState::Waiting,
+            restarts: 0,
+            restart_at: None,
+            last_exit: None,
+            exits: Vec::new(),
+            started: Instant::now(),
+            stalls: 0,
+        });
+    }
+
+    // The prefix must be free; a dead stack's leftovers are removed.
+    let census = ipc::census(&prefix, true)?;
+    if !census.alive.is_empty() {
+        bail!(
+            "a stack with prefix '{prefix}' is already running ({}); stop it or choose another --prefix",
+            census
+                .alive
+                .iter()
+                .map(|(n, p)| format!("{n} pid {p}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    let stale = ipc::remove_leftovers(&prefix)?;
+    if census.cleaned > 0 || !stale.is_empty() {
+        eprintln!(
+            "afs: removed the leftovers of a dead stack '{prefix}' ({} nodes, {} files)",
+            census.cleaned,
+            stale.len()
+        );
+    }
+
+    // Shared memory the supervisor owns and reads.
+    let node = ipc::node(&prefix, "supervisor")?;
+    let world = ipc::create_world(&node).with_context(|| {
+        format!("another supervisor holds prefix '{prefix}'; stop it or choose another --prefix")
+    })?;
+    let status_pub = ipc::supervisor(&node)?
+        .publisher_builder()
+        .create()
+        .map_err(|e| anyhow::anyhow!("status publisher: {e:?}"))?;
+    let plant_sub = ipc::plant(&node)?
+        .subscriber_builder()
+        .buffer_size(ipc::TICK_BUFFER)
+        .create()
+        .map_err(|e| anyhow::anyhow!("plant subscriber: {e:?}"))?;
+    let servo_sub = ipc::servo(&node)?
+        .subscriber_builder()
+        .buffer_size(ipc::TICK_BUFFER)
+        .create()
+        .map_err(|e| anyhow::anyhow!("servo subscriber: {e:?}"))?;
+    let wrench_sub = ipc::wrench(&node)?
+        .subscriber_builder()
+        .buffer_size(ipc::WRENCH_BUFFER)
+        .create()
+        .map_err(|e| anyhow::anyhow!("wrench subscriber: {e:?}"))?;
+    let stats_sub = ipc::loop_stats(&node)?
+        .subscriber_builder()
+        .create()
+        .map_err(|e| anyhow::anyhow!("loop-stats subscriber: {e:?}"))?;
+    let friction_sub = ipc::friction(&node)?
+        .subscriber_builder()
+        .create()
+        .map_err(|e| anyhow::anyhow!("friction subscriber: {e:?}"))?;
+
+    // The set-up the boards read.
+    let dir = std::env::temp_dir().join(format!("afs-{prefix}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let sim_file = match &stack.sim {
+        Some(t) => {
+            let f = dir.join("sim.toml");
+            std::fs::write(&f, toml::to_string(t).context("writing [sim]")?)
+                .with_context(|| format!("writing {}", f.display()))?;
+            Some(f)
+        }
+        None => None,
+    };
+    let launch = Launch {
+        prefix: &prefix,
+        scenario: &stack.scenario,
+        seed: stack.seed,
+        sim_file: sim_file.as_deref(),
+        duration,
+    };
+
+    // The lockstep reference runs meanwhile, at low cost (≈ 200× real time).
+    let reference_scenario = scenario.clone();
+    let reference = std::thread::Builder::new()
+        .name("afs-reference".into())
+        .spawn(move || scenario::run_lockstep(&reference_scenario, duration))
+        .context("starting the reference thread")?;
+    let mut recorder = match &opts.record {
+        Some(p) => Some(Recorder::start(p)?),
+        None => None,
+    };
+
+    let result = supervise(
+        &mut procs,
+        &launch,
+        &scenario,
+        duration,
+        stop,
+        opts.progress,
+        Ports {
+            plant: &plant_sub,
+            servo: &servo_sub,
+            wrench: &wrench_sub,
+            stats: &stats_sub,
+            friction: &friction_sub,
+            status: &status_pub,
+        },
+        &mut recorder,
+    );
+
+    // Shut down in order: the servo first (it holds the world), then the others.
+    for name in ["servo", "estimator", "sensor"] {
+        for p in procs.iter_mut().filter(|p| p.spec.name == name) {
+            p.stop(Duration::from_secs(2));
+        }
+    }
+    for p in procs.iter_mut() {
+        p.stop(Duration::from_secs(2));
+    }
+    let mut run = result?;
+    // The servo's last words.
+    while let Ok(Some(s)) = stats_sub.receive() {
+        run.stats = Some(*s.payload());
+    }
+    let record_summary: Option<RecordSummary> = match recorder {
+        Some(r) => Some(r.finish()?),
+        None => None,
+    };
+    drop((
+        plant_sub,
+        servo_sub,
+        wrench_sub,
+        stats_sub,
+        friction_sub,
+        status_pub,
+        world,
+    ));
+    drop(node);
+    let _ = std::fs::remove_dir_all(&dir);
+    let removed = ipc::remove_leftovers(&prefix).unwrap_or_default();
+    let left = ipc::leftovers(&prefix);
+
+    let reference: ScenarioReport = reference
+        .join()
+        .map_err(|_| anyhow::anyhow!("the reference thread panicked"))?
+        .map_err(anyhow::Error::msg)?;
+    let stack_report = run.monitor.report();
+    let agreement: Agreement = scenario::compare(&stack_report, &reference);
+
+    let mut checks = vec![
+        Check {
+            name: "servo ticks run".into(),
+            value: stack_report.ticks as f64,
+            relation: ">=",
+            limit: 1.0,
+        },
+        Check {
+            name: "processes that gave up (restart limit)".into(),
+            value: procs
+                .iter()
+                .filter(|p| p.state == ProcState::Failed)
+                .count() as f64,
+            relation: "<=",
+            limit: 0.0,
+        },
+        Check {
+            name: "iceoryx2 files of the prefix left".into(),
+            value: left.len() as f64,
+            relation: "<=",
+            limit: 0.0,
+        },
+    ];
+    let finished = run.finished;
+    if finished {
+        checks.push(Check {
+            name: "figures within tolerance of the lockstep reference".into(),
+            value: agreement.figures.iter().filter(|f| !f.agrees).count() as f64,
+            relation: "<=",
+            limit: 0.0,
+        });
+    }
+    match scenario.kind {
+        scenario::ScenarioKind::SurfaceTracking | scenario::ScenarioKind::Corner => {
+            checks.push(Check {
+                name: "servo ticks without contact".into(),
+                value: stack_report.tracking.ticks_without_contact as f64,
+                relation: "<=",
+                limit: 0.0,
+            });
+        }
+        scenario::ScenarioKind::FrictionSuppression => {
+            if let Some(f) = &stack_report.friction
+                && finished
+                && duration >= scenario.natural_duration_s
+            {
+                checks.push(Check {
+                    name: "mean friction at the end / before tuning".into(),
+                    value: f.end_ratio,
+                    relation: "<=",
+                    limit: 0.25,
+                });
+            }
+        }
+        scenario::ScenarioKind::FrictionId => {
+            if finished {
+                checks.push(Check {
+                    name: "friction coefficient identified".into(),
+                    value: f64::from(
+                        run.friction
+                            .is_some_and(|f| f.status & FRICTION_MU_VALID != 0),
+                    ),
+                    relation: ">=",
+                    limit: 1.0,
+                });
+            }
+        }
+    }
+    let passed = checks.iter().all(Check::pass) && !run.interrupted;
+    let report = json!({
+        "scenario": stack.scenario,
+        "prefix": prefix,
+        "seed": stack.seed,
+        "duration_s": duration,
+        "finished": finished,
+        "interrupted": run.interrupted,
+        "passed": passed,
+        "checks": checks.iter().map(|c| json!({
+            "name": c.name, "value": c.value, "relation": c.relation, "limit": c.limit,
+            "pass": c.pass(),
+        })).collect::<Vec<_>>(),
+        "stack": stack_report,
+        "reference": reference,
+        "agreement": agreement,
+        "loop": run.stats.as_ref().map(loop_stats_json),
+        "friction": run.friction.as_ref().map(friction_json),
+        "samples": {
+            "plant_received": run.joiner.plant_received,
+            "servo_received": run.joiner.servo_received,
+            "paired": run.joiner.paired,
+            "plant_lost": run.joiner.plant_lost,
+            "servo_lost": run.joiner.servo_lost,
+            "plant_gaps": run.joiner.plant_gaps,
+            "largest_gap_ticks": run.joiner.max_gap_ticks,
+            "reordered": run.joiner.reordered,
+            "wrench_received": run.wrench_received,
+        },
+        "processes": procs.iter().map(|p| json!({
+            "name": p.spec.name,
+            "restarts": p.restarts,
+            "stalls_killed": p.stalls,
+            "gave_up": p.state == ProcState::Failed,
+            "exits": p.exits,
+        })).collect::<Vec<_>>(),
+        "record": record_summary,
+        "cleanup": {
+            "removed_by_name": removed.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+            "left": left.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+        },
+        "wall_s": run.wall_s,
+    });
+    Ok(RunOutcome { report, passed })
+}
+
+struct Ports<'a> {
+    plant: &'a iceoryx2::port::subscriber::Subscriber<Svc, PlantSample, ()>,
+    servo: &'a iceoryx2::port::subscriber::Subscriber<Svc, ServoSample, ()>,
+    wrench: &'a iceoryx2::port::subscriber::Subscriber<Svc, msg::WrenchSample, ()>,
+    stats: &'a iceoryx2::port::subscriber::Subscriber<Svc, LoopStats, ()>,
+    friction: &'a iceoryx2::port::subscriber::Subscriber<Svc, FrictionReport, ()>,
+    status: &'a iceoryx2::port::publisher::Publisher<Svc, SupervisorStatus, ()>,
+}
+
+struct Supervised {
+    monitor: scenario::ScenarioMonitor,
+    joiner: Joiner,
+    stats: Option<LoopStats>,
+    friction: Option<FrictionReport>,
+    finished: bool,
+    interrupted: bool,
+    wrench_received: u64,
+    wall_s: f64,
+}
+
+#[allow(clippy::too_many_arguments)]
+fn supervise(
+    procs: &mut [Proc],
+    launch: &Launch<'_>,
+    scenario: &Scenario,
+    duration: f64,
+    stop: &AtomicBool,
+    progress: bool,
+    ports: Ports<'_>,
+    recorder: &mut Option<Recorder>,
+) -> Result<Supervised> {
+    let t0 = Instant::now();
+    let mut out = Supervised {
+        monitor: scenario.monitor(),
+        joiner: Joiner::default(),
+        stats: None,
+        friction: None,
+        finished: false,
+        interrupted: false,
+        wrench_received: 0,
+        wall_s: 0.0,
+    };
+    // Servo first (it publishes the world the sensor samples), then the others.
+    for name in ["servo", "sensor", "estimator"] {
+        for p in procs.iter_mut().filter(|p| p.spec.name == name) {
+            p.spawn(launch, false)?;
+        }
+    }
+    for p in procs.iter_mut().filter(|p| p.state == ProcState::Waiting) {
+        p.spawn(launch, false)?;
+    }
+    let tty = std::io::stderr().is_terminal();
+    let mut last_progress = Instant::now();
+    let mut last_status = Instant::now();
+    let mut status_seq = 0u64;
+    let mut last_plant_at = Instant::now();
+    let mut last_wrench_at = Instant::now();
+    let mut last_friction_at = Instant::now();
+    let mut last_time_s = 0.0f64;
+    // Wall-clock limit: the simulated duration plus generous start-up and restart slack.
+    let limit = Duration::from_secs_f64(duration * 1.5 + 30.0);
+    loop {
+        std::thread::sleep(Duration::from_millis(5));
+        if stop.load(Ordering::Relaxed) {
+            out.interrupted = true;
+            break;
+        }
+        // Streams.
+        while let Ok(Some(s)) = ports.plant.receive() {
+            let p = *s.payload();
+            last_plant_at = Instant::now();
+            last_time_s = p.time_s;
+            if let Some(r) = recorder.as_mut() {
+                r.push(Rec::Plant(p));
+            }
+            out.joiner.push_plant(p);
+        }
+        while let Ok(Some(s)) = ports.servo.receive() {
+            let v = *s.payload();
+            if let Some(r) = recorder.as_mut() {
+                r.push(Rec::Servo(v));
+            }
+            out.joiner.push_servo(v);
+        }
+        let monitor = &mut out.monitor;
+        out.joiner.pairs(|p, s| monitor.push(p, s));
+        while let Ok(Some(s)) = ports.wrench.receive() {
+            last_wrench_at = Instant::now();
+            out.wrench_received += 1;
+            if let Some(r) = recorder.as_mut() {
+                r.push(Rec::Wrench(*s.payload()));
+            }
+        }
+        while let Ok(Some(s)) = ports.stats.receive() {
+            out.stats = Some(*s.payload());
+            if let Some(r) = recorder.as_mut() {
+                r.push(Rec::Stats(*s.payload()));
+            }
+        }
+        while let Ok(Some(s)) = ports.friction.receive() {
+            last_friction_at = Instant::now();
+            out.friction = Some(*s.payload());
+            if let Some(r) = recorder.as_mut() {
+                r.push(Rec::Friction(*s.payload()));
+            }
+        }
+
+        // Children.
+        let now = Instant::now();
+        let at_s = t0.elapsed().as_secs_f64();
+        let mut servo_done = false;
+        for p in procs.iter_mut() {
+            if p.state == ProcState::Running {
+                let exited = p.child.as_mut().and_then(|c| c.try_wait().ok().flatten());
+                if let Some(st) = exited {
+                    p.child = None;
+                    p.last_exit = Some(exit_code(&st));
+                    let ok = st.code() == Some(0);
+                    if p.spec.name == "servo" && ok {
+                        servo_done = true;
+                        p.state = ProcState::Exited;
+                        p.exits.push(ExitRecord {
+                            at_s,
+                            status: describe(&st),
+                            restarted: false,
+                        });
+                        continue;
+                    }
+                    let restart = match p.spec.restart {
+                        Restart::Always => true,
+                        Restart::OnFailure => !ok,
+                        Restart::Never => false,
+                    } && p.restarts < p.spec.max_restarts;
+                    p.exits.push(ExitRecord {
+                        at_s,
+                        status: describe(&st),
+                        restarted: restart,
+                    });
+                    if restart {
+                        let backoff = (p.spec.backoff_ms << p.restarts.min(6)).min(2000);
+                        p.state = ProcState::Waiting;
+                        p.restart_at = Some(now + Duration::from_millis(backoff));
+                    } else {
+                        p.state = if ok {
+                            ProcState::Exited
+                        } else {
+                            ProcState::Failed
+                        };
+                        eprintln!(
+                            "afs: {} ended ({}) and will not be restarted",
+                            p.spec.name,
+                            describe(&st)
+                        );
+                    }
+                    // Its node is dead: remove its stale resources.
+                    let _ = ipc::census(launch.prefix, true);
+                    continue;
+                }
+                // Alive but silent?
+                let silent_since = match p.spec.name.as_str() {
+                    "servo" => Some(last_plant_at),
+                    "sensor" => Some(last_wrench_at),
+                    "estimator" => Some(last_friction_at),
+                    _ => None,
+                };
+                if let Some(since) = silent_since {
+                    let stall = Duration::from_millis(p.spec.stall_ms);
+                    let grace = Duration::from_secs(if p.spec.name == "servo" { 5 } else { 2 });
+                    if p.spec.stall_ms > 0
+                        && now.duration_since(since.max(p.started)) > stall
+                        && p.started.elapsed() > grace
+                    {
+                        eprintln!(
+                            "afs: {} (pid {}) is alive but silent for {} ms; killing it",
+                            p.spec.name,
+                            p.pid(),
+                            p.spec.stall_ms
+                        );
+                        p.stalls += 1;
+                        p.signal(libc::SIGKILL);
+                    }
+                }
+            } else if p.state == ProcState::Waiting && p.restart_at.is_some_and(|t| now >= t) {
+                p.restarts += 1;
+                p.restart_at = None;
+                let resume = p.spec.name == "servo";
+                if let Err(e) = p.spawn(launch, resume) {
+                    eprintln!("afs: restarting {}: {e:#}", p.spec.name);
+                    p.state = ProcState::Failed;
+                } else {
+                    // Give the new process its own start-up grace before stall checks.
+                    match p.spec.name.as_str() {
+                        "servo" => last_plant_at = Instant::now(),
+                        "sensor" => last_wrench_at = Instant::now(),
+                        "estimator" => last_friction_at = Instant::now(),
+                        _ => {}
+                    }
+                }
+            }
+        }
+        if servo_done {
+            out.finished = true;
+            break;
+        }
+        if procs
+            .iter()
+            .any(|p| p.spec.name == "servo" && p.state == ProcState::Failed)
+        {
+            break;
+        }
+        if t0.elapsed() > limit {
+            eprintln!(
+                "afs: the scenario did not end within {:.0} s of wall time; stopping",
+                limit.as_secs_f64()
+            );
+            break;
+        }
+
+        if last_status.elapsed() >= Duration::from_millis(500) {
+            last_status = Instant::now();
+            status_seq += 1;
+            let mut st = SupervisorStatus {
+                version: msg::VERSION,
+                process_count: procs.len() as u32,
+                seq: status_seq,
+                publish_ns: rt::monotonic_ns(),
+                pid: std::process::id() as i32,
+                phase: 1,
+                scenario: fixed_str(launch.scenario),
+                elapsed_s: last_time_s,
+                duration_s: duration,
+                ..Default::default()
+            };
+            for (i, p) in procs.iter().enumerate().take(msg::MAX_PROCESSES) {
+                st.processes[i] = ProcessStatus {
+                    name: fixed_str(&p.spec.name),
+                    pid: p.pid(),
+                    state: match p.state {
+                        ProcState::Running => 1,
+                        ProcState::Waiting => 2,
+                        ProcState::Exited => 3,
+                        ProcState::Failed => 4,
+                    },
+                    restarts: p.restarts,
+                    last_exit: p.last_exit.unwrap_or(i32::MIN),
+                };
+            }
+            let _ = ports.status.send_copy(st);
+            if let Some(r) = recorder.as_mut() {
+                r.push(Rec::Status(st));
+            }
+        }
+        if progress && last_progress.elapsed() >= Duration::from_secs(1) {
+            last_progress = Instant::now();
+            let line = progress_line(last_time_s, duration, &out, procs);
+            if tty {
+                eprint!("\r{line}\x1b[K");
+            } else {
+                eprintln!("{line}");
+            }
+        }
+    }
+    if progress && tty {
+        eprintln!();
+    }
+    // What is still in flight.
+    while let Ok(Some(s)) = ports.plant.receive() {
+        out.joiner.push_plant(*s.payload());
+    }
+    while let Ok(Some(s)) = ports.servo.receive() {
+        out.joiner.push_servo(*s.payload());
+    }
+    let monitor = &mut out.monitor;
+    out.joiner.pairs(|p, s| monitor.push(p, s));
+    while let Ok(Some(s)) = ports.friction.receive() {
+        out.friction = Some(*s.payload());
+    }
+    out.wall_s = t0.elapsed().as_secs_f64();
+    Ok(out)
+}
+
+fn progress_line(t: f64, duration: f64, s: &Supervised, procs: &[Proc]) -> String {
+    let r = s.monitor.report();
+    let restarts: u32 = procs.iter().map(|p| p.restarts).sum();
+    let (jit, age) = s.stats.as_ref().map_or((0.0, 0.0), |st| {
+        (
+            st.wake_latency.p99 as f64 / 1000.0,
+            st.force_age.p99 as f64 / 1000.0,
+        )
+    });
+    format!(
+        "afs: {t:6.1}/{duration:.0} s  travelled {:5.1} mm  tangent err RMS {:4.2}°  estimates {}  safe ticks {}  wake p99 {jit:5.1} µs  force age p99 {age:5.1} µs  restarts {restarts}",
+        r.tracking.travelled_m * 1e3,
+        r.tracking.tangent_error_rms_deg,
+        r.tracking.estimations.estimates,
+        r.safe_ticks,
+    )
+}
+
+/// `afs status`: a running stack's processes and loop statistics, read from its status and
+/// statistics streams (subscribing does not disturb the loop).
+pub fn status(prefix: &str, wait: Duration) -> Result<Value> {
+    ipc::check_prefix(prefix)?;
+    let census = ipc::census(prefix, false)?;
+    if census.alive.is_empty() {
+        bail!("no stack with prefix '{prefix}' is running");
+    }
+    let node = ipc::node(prefix, "status")?;
+    let sup = ipc::supervisor(&node)?
+        .subscriber_builder()
+        .create()
+        .map_err(|e| anyhow::anyhow!("status subscriber: {e:?}"))?;
+    let stats = ipc::loop_stats(&node)?
+        .subscriber_builder()
+        .create()
+        .map_err(|e| anyhow::anyhow!("loop-stats subscriber: {e:?}"))?;
+    let friction = ipc::friction(&node)?
+        .subscriber_builder()
+        .create()
+        .map_err(|e| anyhow::anyhow!("friction subscriber: {e:?}"))?;
+    let t0 = Instant::now();
+    let (mut s, mut l, mut f) = (None, None, None);
+    while t0.elapsed() < wait && (s.is_none() || l.is_none()) {
+        while let Ok(Some(x)) = sup.receive() {
+            s = Some(*x.payload());
+        }
+        while let Ok(Some(x)) = stats.receive() {
+            l = Some(*x.payload());
+        }
+        while let Ok(Some(x)) = friction.receive() {
+            f = Some(*x.payload());
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let processes = s.map(|st| {
+        st.processes[..(st.process_count as usize).min(msg::MAX_PROCESSES)]
+            .iter()
+            .map(|p| {
+                let state = ["starting", "running", "restarting", "exited", "failed"]
+                    .get(p.state as usize)
+                    .copied()
+                    .unwrap_or("?");
+                json!({
+                    "name": msg::str_of(&p.name),
+                    "pid": p.pid,
+                    "state": state,
+                    "restarts": p.restarts,
+                    "last_exit": (p.last_exit != i32::MIN).then_some(p.last_exit),
+                })
+            })
+            .collect::<Vec<_>>()
+    });
+    Ok(json!({
+        "prefix": prefix,
+        "nodes": census.alive.iter().map(|(n, p)| json!({"name": n, "pid": p})).collect::<Vec<_>>(),
+        "supervisor": s.map(|st| json!({
+            "pid": st.pid,
+            "scenario": msg::str_of(&st.scenario),
+            "elapsed_s": st.elapsed_s,
+            "duration_s": st.duration_s,
+        })),
+        "processes": processes,
+        "loop": l.as_ref().map(loop_stats_json),
+        "friction": f.as_ref().map(friction_json),
+    }))
+}

@@ -1,0 +1,276 @@
+//! The servo's gate on force data (pure: the caller passes the clock).
+//!
+//! Every received [`WrenchSample`] is offered to the gate, which accepts it only if its version
+//! is right, every value is finite and within the sensor's rated range, its sequence number
+//! moves forward (a later sensor epoch, i.e. a restarted sensor, starts a new sequence), and
+//! its timestamp is not in the future. At each tick the servo asks for the newest accepted
+//! sample; if it is older than the age limit (default 2 ms) or none was ever accepted, the
+//! verdict says so and the servo goes to its safe state. Rejected samples never reach the
+//! controller as values; each is counted by kind.
+
+use crate::msg::{VERSION, WrenchSample};
+
+/// Why a sample or a tick was refused. The numbers are the `safe_reason` codes of
+/// [`crate::msg::ServoSample`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum Verdict {
+    /// Accepted / fresh.
+    Ok = 0,
+    /// A NaN or infinite value.
+    NonFinite = 1,
+    /// Beyond the sensor's rated range.
+    OutOfRange = 2,
+    /// The same sequence number again.
+    SeqRepeat = 3,
+    /// A sequence number (or sensor epoch) older than the newest accepted.
+    SeqBackwards = 4,
+    /// A timestamp later than now.
+    Future = 5,
+    /// Wrong message version.
+    Version = 6,
+    /// The newest accepted sample is older than the age limit.
+    Stale = 7,
+    /// No sample accepted yet.
+    NoData = 8,
+}
+
+/// Limits of the gate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GateParams {
+    /// Largest age of force data at use (ns).
+    pub max_age_ns: u64,
+    /// Largest |force component| accepted (N): the sensor's rated range.
+    pub force_limit_n: f64,
+    /// Largest |moment| accepted (N·m).
+    pub torque_limit_nm: f64,
+    /// How far in the future a timestamp may be (ns), for clock reads racing each other.
+    pub future_tolerance_ns: u64,
+}
+
+impl Default for GateParams {
+    fn default() -> Self {
+        Self {
+            max_age_ns: 2_000_000,
+            force_limit_n: 130.0,
+            torque_limit_nm: 10.0,
+            future_tolerance_ns: 50_000,
+        }
+    }
+}
+
+/// Counts of refused samples, by kind.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct GateCounters {
+    /// [`Verdict::NonFinite`].
+    pub non_finite: u64,
+    /// [`Verdict::OutOfRange`].
+    pub out_of_range: u64,
+    /// [`Verdict::SeqRepeat`].
+    pub seq_repeat: u64,
+    /// [`Verdict::SeqBackwards`].
+    pub seq_backwards: u64,
+    /// [`Verdict::Future`].
+    pub future: u64,
+    /// [`Verdict::Version`].
+    pub version: u64,
+    /// Accepted samples.
+    pub accepted: u64,
+    /// Sensor restarts seen (new epochs).
+    pub new_epochs: u64,
+}
+
+/// The gate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SampleGate {
+    params: GateParams,
+    newest: Option<WrenchSample>,
+    counters: GateCounters,
+}
+
+impl SampleGate {
+    /// A gate with no sample yet.
+    pub fn new(params: GateParams) -> Self {
+        Self {
+            params,
+            newest: None,
+            counters: GateCounters::default(),
+        }
+    }
+
+    /// Offers a received sample at monotonic time `now_ns`; returns the verdict.
+    pub fn offer(&mut self, s: &WrenchSample, now_ns: u64) -> Verdict {
+        let v = self.judge(s, now_ns);
+        let c = &mut self.counters;
+        match v {
+            Verdict::Ok => {
+                c.accepted += 1;
+                if self.newest.is_some_and(|n| s.epoch_ns > n.epoch_ns) {
+                    c.new_epochs += 1;
+                }
+                self.newest = Some(*s);
+            }
+            Verdict::NonFinite => c.non_finite += 1,
+            Verdict::OutOfRange => c.out_of_range += 1,
+            Verdict::SeqRepeat => c.seq_repeat += 1,
+            Verdict::SeqBackwards => c.seq_backwards += 1,
+            Verdict::Future => c.future += 1,
+            Verdict::Version => c.version += 1,
+            Verdict::Stale | Verdict::NoData => {}
+        }
+        v
+    }
+
+    fn judge(&self, s: &WrenchSample, now_ns: u64) -> Verdict {
+        if s.version != VERSION {
+            return Verdict::Version;
+        }
+        let values = [s.force_n[0], s.force_n[1], s.torque_nm];
+        let tare = [s.tare_force_n[0], s.tare_force_n[1], s.tare_torque_nm];
+        if values.iter().chain(&tare).any(|v| !v.is_finite()) {
+            return Verdict::NonFinite;
+        }
+        let p = &self.params;
+        if s.force_n
+            .iter()
+            .chain(&s.tare_force_n)
+            .any(|f| f.abs() > p.force_limit_n)
+            || s.torque_nm.abs() > p.torque_limit_nm
+            || s.tare_torque_nm.abs() > p.torque_limit_nm
+        {
+            return Verdict::OutOfRange;
+        }
+        let limit = now_ns.saturating_add(p.future_tolerance_ns);
+        if s.sample_ns > limit || s.epoch_ns > limit || s.publish_ns > limit {
+            return Verdict::Future;
+        }
+        if let Some(n) = self.newest {
+            if s.epoch_ns < n.epoch_ns {
+                return Verdict::SeqBackwards;
+            }
+            if s.epoch_ns == n.epoch_ns {
+                if s.seq == n.seq {
+                    return Verdict::SeqRepeat;
+                }
+                if s.seq < n.seq || s.sample_ns < n.sample_ns {
+                    return Verdict::SeqBackwards;
+                }
+            }
+        }
+        Verdict::Ok
+    }
+
+    /// The newest accepted sample and its age at `now_ns`, or why there is none to use.
+    pub fn current(&self, now_ns: u64) -> Result<(WrenchSample, u64), Verdict> {
+        let n = self.newest.ok_or(Verdict::NoData)?;
+        let age = now_ns.saturating_sub(n.sample_ns);
+        if age > self.params.max_age_ns {
+            Err(Verdict::Stale)
+        } else {
+            Ok((n, age))
+        }
+    }
+
+    /// The counters.
+    pub fn counters(&self) -> GateCounters {
+        self.counters
+    }
+
+    /// The limits.
+    pub fn params(&self) -> &GateParams {
+        &self.params
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample(seq: u64, t: u64) -> WrenchSample {
+        WrenchSample {
+            version: VERSION,
+            seq,
+            epoch_ns: 1_000,
+            sample_ns: t,
+            publish_ns: t,
+            force_n: [1.0, -2.0],
+            torque_nm: 0.01,
+            ..Default::default()
+        }
+    }
+
+    /// Good samples pass and age; a stale or missing one is refused at the tick.
+    #[test]
+    fn fresh_samples_pass_and_age_out() {
+        let mut g = SampleGate::new(GateParams::default());
+        assert_eq!(g.current(10_000), Err(Verdict::NoData));
+        assert_eq!(g.offer(&sample(0, 10_000), 10_100), Verdict::Ok);
+        assert_eq!(g.current(10_100).map(|x| x.1), Ok(100));
+        assert_eq!(
+            g.current(10_000 + 2_000_000),
+            Ok((sample(0, 10_000), 2_000_000))
+        );
+        assert_eq!(g.current(10_000 + 2_000_001), Err(Verdict::Stale));
+    }
+
+    /// Each kind of bad sample is refused, counted, and leaves the newest good one in place.
+    #[test]
+    fn bad_samples_never_replace_good_ones() {
+        let mut g = SampleGate::new(GateParams::default());
+        let good = sample(5, 50_000);
+        assert_eq!(g.offer(&good, 50_000), Verdict::Ok);
+        let now = 60_000;
+        let mut nan = sample(6, 55_000);
+        nan.force_n[1] = f64::NAN;
+        let mut inf = sample(6, 55_000);
+        inf.tare_torque_nm = f64::INFINITY;
+        let mut big = sample(6, 55_000);
+        big.force_n[0] = 1e6;
+        let mut future = sample(6, 55_000);
+        future.sample_ns = now + 1_000_000;
+        let mut version = sample(6, 55_000);
+        version.version = 0;
+        let mut old_epoch = sample(9, 55_000);
+        old_epoch.epoch_ns = 10;
+        let cases = [
+            (nan, Verdict::NonFinite),
+            (inf, Verdict::NonFinite),
+            (big, Verdict::OutOfRange),
+            (future, Verdict::Future),
+            (version, Verdict::Version),
+            (sample(5, 50_000), Verdict::SeqRepeat),
+            (sample(4, 49_000), Verdict::SeqBackwards),
+            (sample(7, 40_000), Verdict::SeqBackwards),
+            (old_epoch, Verdict::SeqBackwards),
+        ];
+        for (s, v) in cases {
+            assert_eq!(g.offer(&s, now), v, "{s:?}");
+            assert_eq!(g.current(now), Ok((good, now - good.sample_ns)));
+        }
+        let c = g.counters();
+        assert_eq!(
+            (
+                c.non_finite,
+                c.out_of_range,
+                c.future,
+                c.version,
+                c.seq_repeat,
+                c.seq_backwards
+            ),
+            (2, 1, 1, 1, 1, 3)
+        );
+        assert_eq!(c.accepted, 1);
+    }
+
+    /// A restarted sensor (later epoch) starts its sequence again and is accepted.
+    #[test]
+    fn a_new_sensor_epoch_restarts_the_sequence() {
+        let mut g = SampleGate::new(GateParams::default());
+        assert_eq!(g.offer(&sample(900, 50_000), 50_000), Verdict::Ok);
+        let mut restarted = sample(0, 70_000);
+        restarted.epoch_ns = 65_000;
+        assert_eq!(g.offer(&restarted, 70_000), Verdict::Ok);
+        assert_eq!(g.counters().new_epochs, 1);
+        assert_eq!(g.offer(&sample(901, 71_000), 71_000), Verdict::SeqBackwards);
+    }
+}
