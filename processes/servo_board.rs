@@ -327,6 +327,9 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
         }
     }
     let mut seq = snapshot.map_or(0, |s| s.seq + 1);
+    // Ticks 1..=tick_limit are the scenario's (0 is the world's first sample): the same count
+    // the lockstep runs, whatever restarts happen in between.
+    let tick_limit = (duration / dt).round() as u64;
     let tangent0 = snapshot.map_or(
         cfg.surface.tangent_angle_at(cfg.start_u_m) + cfg.tangent_error_rad,
         |s| s.tangent_angle_rad,
@@ -471,7 +474,7 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
         }
         // Scenario, control, world.
         let t = plant.time();
-        if t >= duration
+        if seq > tick_limit
             || driver.step(t, plant.truth().surface_u_m, &mut servo) == DriverState::Done
         {
             break;

@@ -384,7 +384,10 @@ impl OnlineFrictionId {
         let mean = same.iter().sum::<f64>() / n;
         let var = same.iter().map(|m| (m - mean).powi(2)).sum::<f64>() / n;
         self.last_mu = Some((mean, var.sqrt()));
-        self.fit = fit_friction_law(&self.points).ok();
+        // A fit is kept only if it is physical: kinetic friction > 0, Stribeck term ≥ 0.
+        self.fit = fit_friction_law(&self.points)
+            .ok()
+            .filter(|f| f.law.kinetic_n > 0.0 && f.law.stribeck_n >= 0.0);
     }
 
     /// The state of the identification.
