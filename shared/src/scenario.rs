@@ -628,7 +628,27 @@ pub struct ScenarioMonitor {
     count: u64,
     counters: EstimationCounters,
     safe_ticks: u64,
+    invalid: Vec<TickRange>,
 }
+
+/// A run of consecutive servo ticks, by sequence number.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct TickRange {
+    /// First tick's sequence number.
+    pub first: u64,
+    /// Number of ticks.
+    pub len: u64,
+}
+
+impl TickRange {
+    /// True when `seq` lies in the range.
+    pub fn contains(&self, seq: u64) -> bool {
+        seq >= self.first && seq - self.first < self.len
+    }
+}
+
+/// Most force-invalid tick ranges a monitor keeps (later ones are merged into the last).
+const MAX_INVALID_RANGES: usize = 100_000;
 
 impl ScenarioMonitor {
     /// A monitor for `scenario`.
@@ -644,6 +664,24 @@ impl ScenarioMonitor {
             count: 0,
             counters: EstimationCounters::default(),
             safe_ticks: 0,
+            invalid: Vec::new(),
+        }
+    }
+
+    /// The ticks whose force input the servo did not use (stale, out of range, absent), as
+    /// ranges of sequence numbers: what [`run_lockstep_replay`] replays.
+    pub fn force_invalid(&self) -> &[TickRange] {
+        &self.invalid
+    }
+
+    fn note_invalid(&mut self, seq: u64) {
+        let full = self.invalid.len() >= MAX_INVALID_RANGES;
+        match self.invalid.last_mut() {
+            Some(r) if seq == r.first + r.len => r.len += 1,
+            Some(r) if full && seq > r.first => {
+                r.len = seq - r.first + 1;
+            }
+            _ => self.invalid.push(TickRange { first: seq, len: 1 }),
         }
     }
 
@@ -660,6 +698,9 @@ impl ScenarioMonitor {
         };
         if s.flags & SERVO_SAFE != 0 {
             self.safe_ticks += 1;
+        }
+        if s.flags & msg::SERVO_FORCE_VALID == 0 {
+            self.note_invalid(s.seq);
         }
         if self.kind == ScenarioKind::FrictionSuppression {
             let period_end = m.phase < self.last_phase;
@@ -745,23 +786,45 @@ pub struct ScenarioReport {
 }
 
 /// Runs `scenario` for `duration_s` (or to its end) in the lockstep simulation: the reference
-/// the real-time stack is compared with.
+/// the real-time stack is compared with. Tick `seq` (from 1, as the servo numbers them) steps
+/// the world from simulated time (seq − 1)·dt.
 pub fn run_lockstep(scenario: &Scenario, duration_s: f64) -> Result<ScenarioReport, String> {
+    run_lockstep_replay(scenario, duration_s, &[])
+}
+
+/// [`run_lockstep`], with the servo's force input made invalid on the ticks the real-time
+/// stack could not use its force data (`invalid`, from
+/// [`ScenarioMonitor::force_invalid`]): the reference then goes through the same safe-state
+/// episodes at the same ticks, so that a scheduling hiccup of the machine (which aborts a
+/// probe run and shifts every later event) is part of both runs rather than a disagreement.
+pub fn run_lockstep_replay(
+    scenario: &Scenario,
+    duration_s: f64,
+    invalid: &[TickRange],
+) -> Result<ScenarioReport, String> {
     let mut sim = Lockstep::new(&scenario.cfg)?;
     let mut driver = scenario.driver();
     let mut monitor = scenario.monitor();
     let dt = sim.dt();
     let limit = (duration_s.min(scenario.natural_duration_s) / dt).round() as u64;
-    for seq in 0..limit {
-        let t = seq as f64 * dt;
+    let mut next = 0;
+    for seq in 1..=limit {
+        let t = (seq - 1) as f64 * dt;
         let u = sim.truth().surface_u_m;
         if driver.step(t, u, sim.servo_mut()) == DriverState::Done {
             break;
         }
+        while next < invalid.len() && invalid[next].first + invalid[next].len <= seq {
+            next += 1;
+        }
+        let valid = !invalid.get(next).is_some_and(|r| r.contains(seq));
+        sim.set_force_valid(valid);
         sim.step();
         let p = plant_sample(sim.truth(), seq, 0);
         let mut s = servo_sample(sim.servo(), seq, 0, sim.time());
-        s.flags |= msg::SERVO_FORCE_VALID;
+        if valid {
+            s.flags |= msg::SERVO_FORCE_VALID;
+        }
         monitor.push(&p, &s);
     }
     let mut report = monitor.report();
@@ -895,6 +958,48 @@ mod tests {
         assert_eq!(r.tracking.ticks_without_contact, 0);
         let c = compare(&r, &r);
         assert!(c.agrees);
+    }
+
+    /// Replaying force-invalid ticks: the reference goes through the same safe-state episodes
+    /// at the same ticks and its monitor sees exactly the replayed ranges; with none it is the
+    /// plain reference, bit for bit.
+    #[test]
+    fn the_reference_replays_the_stacks_invalid_force_ticks() {
+        let base = SimConfig::default();
+        let s = Scenario::new("surface-tracking", &base).unwrap();
+        let plain = run_lockstep(&s, 1.0).unwrap();
+        let none = run_lockstep_replay(&s, 1.0, &[]).unwrap();
+        assert_eq!(
+            plain.tracking.tangent_error_rms_deg,
+            none.tracking.tangent_error_rms_deg
+        );
+        assert_eq!(none.safe_ticks, 0);
+        let gaps = [
+            TickRange {
+                first: 3000,
+                len: 25,
+            },
+            TickRange {
+                first: 6000,
+                len: 1,
+            },
+        ];
+        let replayed = run_lockstep_replay(&s, 1.0, &gaps).unwrap();
+        // Each gap enters the safe state, which lasts until the data has been good for the
+        // recovery time (20 ms = 200 ticks) after the gap.
+        assert!(replayed.safe_ticks >= 2 * 200, "{}", replayed.safe_ticks);
+        assert!(
+            replayed.safe_ticks <= 25 + 1 + 2 * 201,
+            "{}",
+            replayed.safe_ticks
+        );
+        let mut m = s.monitor();
+        for r in gaps {
+            for seq in r.first..r.first + r.len {
+                m.note_invalid(seq);
+            }
+        }
+        assert_eq!(m.force_invalid(), gaps);
     }
 
     /// The friction-id driver strokes back and forth at each speed and then stops.
