@@ -5,11 +5,16 @@
 //! ```
 //! `servo_tick` is one fast-loop tick (hybrid control, dither, tuner, IK, PID); `lockstep_step`
 //! adds the plant and the sensor; `lockstep_10s` simulates 10 s at 10 kHz (the real-time factor
-//! is 10 s divided by its time).
+//! is 10 s divided by its time); `tuner_step/{cost,thesis}` is one tick of each dither tuner;
+//! `tangent_estimate` is the estimator's answer to a two-probe record (200 hold samples and
+//! two probes of 2 000 samples, the size the servo sends at 1 kHz).
 
 use afs_shared::friction::FrictionLaw;
+use afs_shared::math::{perp, unit};
 use afs_shared::servo::ServoInput;
 use afs_shared::sim::{Lockstep, SimConfig};
+use afs_shared::tangent::{self, HOLD, ProbeSample, TangentParams};
+use afs_shared::tuner::{ThesisTunerParams, Tuner, TunerConfig, TunerInput};
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
 use std::time::Duration;
@@ -50,6 +55,74 @@ fn benches(c: &mut Criterion) {
         b.iter_batched(running_sim, |mut s| s.run(100_000), BatchSize::LargeInput)
     });
     g.finish();
+
+    let ctx = *sim.servo().tuner_context();
+    for (name, config) in [
+        ("cost", TunerConfig::default()),
+        ("thesis", TunerConfig::Thesis(ThesisTunerParams::default())),
+    ] {
+        let mut tuner = Tuner::new(&config, &ctx, 0.02);
+        let mut k = 0u64;
+        c.bench_function(&format!("tuner_step/{name}"), |b| {
+            b.iter(|| {
+                k += 1;
+                let phase = (k % 1000) as f64 * std::f64::consts::TAU / 1000.0;
+                let inp = TunerInput {
+                    friction_n: 0.5 + 0.3 * phase.sin(),
+                    velocity_m_per_s: 0.01 + 0.05 * phase.cos(),
+                    nominal_m_per_s: 0.01,
+                    phase,
+                    period_end: k.is_multiple_of(1000),
+                    normal_n: 2.5,
+                };
+                black_box(tuner.update(&ctx, black_box(&inp)))
+            })
+        });
+    }
+
+    let params = TangentParams::default();
+    let plan = params.first_plan();
+    let (base, alpha0, k, preload) = (0.3f64, 3f64.to_radians(), 1400.0, 2.5);
+    let n_true = perp(unit(base - alpha0));
+    let mut rec = Vec::new();
+    for i in 0..200 {
+        let f = n_true * preload;
+        rec.push(ProbeSample {
+            t: i as f64 * 1e-3,
+            force: [f.x, f.y],
+            tip: [0.0, 0.0],
+            phase: 0.0,
+            probe: HOLD,
+            measured: false,
+        });
+    }
+    for (j, off) in plan.offsets[..plan.count].iter().enumerate() {
+        let dir = unit(base + off);
+        for i in 0..2000 {
+            let phase = std::f64::consts::TAU * i as f64 / 1000.0;
+            let tip = dir * (plan.amplitude_m * phase.sin());
+            let f = n_true * (preload - k * tip.dot(&n_true));
+            rec.push(ProbeSample {
+                t: i as f64 * 1e-3,
+                force: [f.x, f.y],
+                tip: [tip.x, tip.y],
+                phase,
+                probe: j as u8,
+                measured: true,
+            });
+        }
+    }
+    c.bench_function("tangent_estimate", |b| {
+        b.iter(|| {
+            black_box(tangent::estimate(
+                black_box(&rec),
+                &plan,
+                base,
+                &params,
+                false,
+            ))
+        })
+    });
 
     let law = FrictionLaw::THESIS;
     c.bench_function("friction_cycle_closed_form", |b| {

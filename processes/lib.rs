@@ -2,9 +2,11 @@
 //! shells' loops, the supervisor, recording and plots. No algorithm lives here; it calls
 //! `afs_shared`.
 
+pub mod bench;
 pub mod board;
 pub mod estimator_board;
 pub mod experiment;
+pub mod hist;
 pub mod ipc;
 pub mod plot;
 pub mod record;

@@ -112,9 +112,16 @@ pub fn setup(priority: u8, lock_memory: bool, cpu: Option<usize>) -> RtReport {
     r
 }
 
-/// Number of CPUs this process may run on.
+/// Number of CPUs online (not this thread's affinity mask: a process pinned to one CPU may
+/// still pin a child to another).
 pub fn available_cpus() -> usize {
-    std::thread::available_parallelism().map_or(1, |n| n.get())
+    // SAFETY: sysconf is a plain query.
+    let n = unsafe { libc::sysconf(libc::_SC_NPROCESSORS_ONLN) };
+    if n > 0 {
+        n as usize
+    } else {
+        std::thread::available_parallelism().map_or(1, |n| n.get())
+    }
 }
 
 /// Resident set size of a process (bytes), from /proc.

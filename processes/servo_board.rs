@@ -9,7 +9,7 @@
 //! pre-mapped shared memory.
 
 use crate::ipc::{self, Svc};
-use crate::rt;
+use crate::{hist, rt};
 use afs_shared::msg::{
     self, LoopStats, Quantiles, SERVO_FORCE_VALID, STATS_MLOCKED, STATS_PINNED, STATS_SCHED_FIFO,
     TangentRequestHeader, TangentResponse, WorldSnapshot,
@@ -28,6 +28,7 @@ use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use iceoryx2::request_mut_uninit::RequestMutUninit;
 use std::mem::MaybeUninit;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 /// How the servo runs.
@@ -55,6 +56,8 @@ pub struct ServoArgs {
     pub estimator_attempts: u32,
     /// Time to wait for the first force sample (s).
     pub startup_timeout_s: f64,
+    /// Save the wake, execution-time and force-age histograms here at the end.
+    pub histograms: Option<PathBuf>,
 }
 
 /// How the servo ended.
@@ -205,17 +208,21 @@ struct Timing {
     age: Histogram<u64>,
 }
 
-/// Largest value the histograms hold (ns); larger ones are recorded as this.
-const HIST_MAX_NS: u64 = 1_000_000_000;
-
 impl Timing {
     fn new() -> Result<Self> {
-        let h = || Histogram::<u64>::new_with_bounds(1, HIST_MAX_NS, 2).context("histogram");
         Ok(Self {
-            wake: h()?,
-            exec: h()?,
-            age: h()?,
+            wake: hist::new()?,
+            exec: hist::new()?,
+            age: hist::new()?,
         })
+    }
+
+    /// Saves the histograms (V2 format) as `wake.hdr`, `exec.hdr` and `force_age.hdr` in `dir`.
+    fn save(&self, dir: &Path) -> Result<()> {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        hist::save(&self.wake, &dir.join("wake.hdr"))?;
+        hist::save(&self.exec, &dir.join("exec.hdr"))?;
+        hist::save(&self.age, &dir.join("force_age.hdr"))
     }
 }
 
@@ -234,7 +241,7 @@ fn quantiles(h: &Histogram<u64>) -> Quantiles {
 }
 
 fn record(h: &mut Histogram<u64>, v: u64) {
-    let _ = h.record(v.clamp(1, HIST_MAX_NS));
+    hist::record(h, v);
 }
 
 /// Runs the board until the scenario ends, the duration passes or `stop` is set.
@@ -529,6 +536,9 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
         }
     }
     publish_stats(&mut stats, &timing, &gate, &link, &servo, &stats_pub);
+    if let Some(dir) = &args.histograms {
+        timing.save(dir)?;
+    }
     Ok(end)
 }
 

@@ -97,6 +97,41 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Measure latency and jitter against the machine's floor and the usual alternatives.
+    ///
+    /// hop: message round trip and one-way latency between two processes over iceoryx2 (afs's
+    /// services, busy-poll and event wake-up; bare iceoryx2), against a shared-memory atomic
+    /// ping-pong (the floor) and a Unix socket, in interleaved rounds. loop: the servo's wake
+    /// latency against a bare absolute-time loop at the same priority on the same core, at the
+    /// same time. stack: force age at use and servo wake latency, without and with a CPU hog.
+    /// Writes .hgrm histograms and SVG percentile plots into --out.
+    Bench {
+        /// hop, loop, stack or all.
+        #[arg(value_enum, default_value = "all")]
+        part: afs::bench::Part,
+        /// Seconds of measurement per part (stack: this much without and with the hog).
+        #[arg(long, default_value_t = 10.0)]
+        duration: f64,
+        /// Directory for histograms and plots.
+        #[arg(long, default_value = "out/bench")]
+        out: PathBuf,
+        /// Prefix of the benchmark's shared memory (suffixed per part).
+        #[arg(long, default_value = "bench")]
+        prefix: String,
+        /// Print the report as one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
+    /// The other end of `afs bench hop` (started by it).
+    #[command(hide = true)]
+    BenchPeer {
+        #[arg(long)]
+        prefix: String,
+        #[arg(long)]
+        socket: PathBuf,
+        #[arg(long)]
+        cpu: Option<usize>,
+    },
     /// Draw the force, position and dither histories of a recording (SVG).
     Plot {
         /// The MCAP file from `afs run --record`.
@@ -233,6 +268,40 @@ fn run() -> Result<ExitCode> {
             }
             Ok(ExitCode::SUCCESS)
         }
+        Command::Bench {
+            part,
+            duration,
+            out,
+            prefix,
+            json,
+        } => {
+            let stop = afs::board::stop_flag()?;
+            let opts = afs::bench::BenchOptions {
+                part,
+                duration_s: duration,
+                out,
+                prefix,
+            };
+            let r = afs::bench::run(&opts, &stop)?;
+            if json {
+                say!("{}", serde_json::to_string_pretty(&r)?);
+            } else {
+                print_bench(&r);
+            }
+            Ok(if r["interrupted"] == true {
+                ExitCode::from(1)
+            } else {
+                ExitCode::SUCCESS
+            })
+        }
+        Command::BenchPeer {
+            prefix,
+            socket,
+            cpu,
+        } => {
+            afs::bench::peer(&prefix, &socket, cpu)?;
+            Ok(ExitCode::SUCCESS)
+        }
         Command::Messages => {
             for l in afs_shared::msg::layouts() {
                 say!("{}", l.markdown());
@@ -240,6 +309,59 @@ fn run() -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
     }
+}
+
+fn print_bench(r: &serde_json::Value) {
+    for part in ["hop", "loop", "stack"] {
+        let Some(series) = r[part]["series"].as_object() else {
+            continue;
+        };
+        say!("{part}:");
+        say!(
+            "  {:<28} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9}  {:>9}",
+            "series (µs)",
+            "p50",
+            "p90",
+            "p99",
+            "p99.9",
+            "p99.99",
+            "max",
+            "p50/floor"
+        );
+        for (name, v) in series {
+            let s = &v["summary_us"];
+            let f = |k: &str| s[k].as_f64().unwrap_or(f64::NAN);
+            say!(
+                "  {:<28} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2}  {:>9}",
+                name,
+                f("p50"),
+                f("p90"),
+                f("p99"),
+                f("p99_9"),
+                f("p99_99"),
+                f("max"),
+                v["ratio_to_floor"]["p50"]
+                    .as_f64()
+                    .map_or("-".to_string(), |x| format!("{x:.2}"))
+            );
+        }
+        if let Some(ts) = r[part]["targets"].as_array() {
+            for t in ts {
+                say!(
+                    "  target: {} = {:.3} {} {} → {}",
+                    t["name"].as_str().unwrap_or("?"),
+                    t["value"].as_f64().unwrap_or(f64::NAN),
+                    t["relation"].as_str().unwrap_or("?"),
+                    t["limit"],
+                    if t["met"] == true { "met" } else { "NOT met" }
+                );
+            }
+        }
+    }
+    say!(
+        "files in the --out directory; {:.1} s",
+        r["wall_s"].as_f64().unwrap_or(0.0)
+    );
 }
 
 fn print_human(r: &serde_json::Value) {

@@ -34,6 +34,10 @@ struct Cli {
     /// Seconds to wait for the first force sample.
     #[arg(long, default_value_t = 10.0)]
     startup_timeout: f64,
+    /// Save the loop's wake, execution-time and force-age histograms (HdrHistogram V2:
+    /// wake.hdr, exec.hdr, force_age.hdr) in this directory when the run ends.
+    #[arg(long)]
+    histograms: Option<std::path::PathBuf>,
 }
 
 fn main() -> ExitCode {
@@ -61,6 +65,7 @@ fn main() -> ExitCode {
             estimator_timeout_s: cli.estimator_timeout,
             estimator_attempts: cli.estimator_attempts,
             startup_timeout_s: cli.startup_timeout,
+            histograms: cli.histograms.clone(),
         };
         run(&args, &stop)
     })();

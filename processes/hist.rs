@@ -1,0 +1,162 @@
+//! Latency histograms (HdrHistogram) shared by the servo board and `afs bench`: saved in the
+//! HdrHistogram V2 format (`.hdr`, readable by every HdrHistogram implementation), written as
+//! the standard percentile distribution (`.hgrm`, which HdrHistogram's plotter reads), and
+//! summarised as the percentiles the JSON reports carry.
+
+use anyhow::{Context, Result};
+use hdrhistogram::Histogram;
+use hdrhistogram::serialization::{Deserializer, Serializer, V2Serializer};
+use serde::Serialize;
+use std::io::Write;
+use std::path::Path;
+
+/// Largest value a histogram holds (ns); larger ones are recorded as this.
+pub const MAX_NS: u64 = 1_000_000_000;
+
+/// A histogram of nanoseconds from 1 ns to [`MAX_NS`], 3 significant digits.
+pub fn new() -> Result<Histogram<u64>> {
+    Histogram::<u64>::new_with_bounds(1, MAX_NS, 3).context("allocating a histogram")
+}
+
+/// Records `ns`, clamped into the histogram's range (never allocates).
+pub fn record(h: &mut Histogram<u64>, ns: u64) {
+    let _ = h.record(ns.clamp(1, MAX_NS));
+}
+
+/// Saves `h` in the V2 format.
+pub fn save(h: &Histogram<u64>, path: &Path) -> Result<()> {
+    let mut buf = Vec::new();
+    V2Serializer::new()
+        .serialize(h, &mut buf)
+        .map_err(|e| anyhow::anyhow!("encoding a histogram: {e:?}"))?;
+    std::fs::write(path, buf).with_context(|| format!("writing {}", path.display()))
+}
+
+/// Loads a histogram saved by [`save`].
+pub fn load(path: &Path) -> Result<Histogram<u64>> {
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    Deserializer::new()
+        .deserialize(&mut bytes.as_slice())
+        .map_err(|e| anyhow::anyhow!("decoding the histogram {}: {e:?}", path.display()))
+}
+
+/// Writes the percentile distribution of `h` (values in µs) in HdrHistogram's `.hgrm` text.
+pub fn write_hgrm(h: &Histogram<u64>, path: &Path) -> Result<()> {
+    let mut out = String::from("       Value     Percentile TotalCount 1/(1-Percentile)\n\n");
+    for v in h.iter_quantiles(5) {
+        let q = v.quantile_iterated_to();
+        let inv = if q < 1.0 {
+            format!("{:14.2}", 1.0 / (1.0 - q))
+        } else {
+            format!("{:>14}", "inf")
+        };
+        out.push_str(&format!(
+            "{:12.3} {:14.12} {:10} {inv}\n",
+            v.value_iterated_to() as f64 / 1e3,
+            q,
+            v.count_since_last_iteration()
+        ));
+    }
+    out.push_str(&format!(
+        "#[Mean    = {:12.3}, StdDeviation   = {:12.3}]\n#[Max     = {:12.3}, Total count    = {:12}]\n",
+        h.mean() / 1e3,
+        h.stdev() / 1e3,
+        h.max() as f64 / 1e3,
+        h.len()
+    ));
+    let mut f =
+        std::fs::File::create(path).with_context(|| format!("writing {}", path.display()))?;
+    f.write_all(out.as_bytes())
+        .with_context(|| format!("writing {}", path.display()))
+}
+
+/// The percentiles a report carries (µs).
+#[derive(Debug, Clone, Copy, Serialize, PartialEq)]
+pub struct Summary {
+    /// Values recorded.
+    pub count: u64,
+    /// Median (µs).
+    pub p50: f64,
+    /// 90th percentile (µs).
+    pub p90: f64,
+    /// 99th percentile (µs).
+    pub p99: f64,
+    /// 99.9th percentile (µs).
+    pub p99_9: f64,
+    /// 99.99th percentile (µs).
+    pub p99_99: f64,
+    /// Largest (µs).
+    pub max: f64,
+}
+
+impl Summary {
+    /// The summary of `h` (all NaN when it is empty).
+    pub fn of(h: &Histogram<u64>) -> Self {
+        let q = |x: f64| {
+            if h.is_empty() {
+                f64::NAN
+            } else {
+                h.value_at_quantile(x) as f64 / 1e3
+            }
+        };
+        Self {
+            count: h.len(),
+            p50: q(0.5),
+            p90: q(0.9),
+            p99: q(0.99),
+            p99_9: q(0.999),
+            p99_99: q(0.9999),
+            max: if h.is_empty() {
+                f64::NAN
+            } else {
+                h.max() as f64 / 1e3
+            },
+        }
+    }
+
+    /// Each percentile divided by the floor's.
+    pub fn ratio_to(&self, floor: &Summary) -> Summary {
+        Summary {
+            count: self.count,
+            p50: self.p50 / floor.p50,
+            p90: self.p90 / floor.p90,
+            p99: self.p99 / floor.p99,
+            p99_9: self.p99_9 / floor.p99_9,
+            p99_99: self.p99_99 / floor.p99_99,
+            max: self.max / floor.max,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A histogram survives the V2 round trip and its percentiles are the recorded values'.
+    #[test]
+    fn round_trip_and_percentiles() {
+        let mut h = new().unwrap();
+        for v in 1..=10_000u64 {
+            record(&mut h, v * 1000);
+        }
+        let dir = std::env::temp_dir().join(format!("afs-hist-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("h.hdr");
+        save(&h, &p).unwrap();
+        let back = load(&p).unwrap();
+        assert_eq!(back, h);
+        let s = Summary::of(&back);
+        assert_eq!(s.count, 10_000);
+        // 3 significant digits: within 0.1 %.
+        assert!((s.p50 - 5000.0).abs() <= 5.0, "{}", s.p50);
+        assert!((s.p99 - 9900.0).abs() <= 10.0, "{}", s.p99);
+        assert!((s.max - 10_000.0).abs() <= 10.0, "{}", s.max);
+        let r = s.ratio_to(&s);
+        assert_eq!(r.p50, 1.0);
+        write_hgrm(&back, &dir.join("h.hgrm")).unwrap();
+        let text = std::fs::read_to_string(dir.join("h.hgrm")).unwrap();
+        assert!(text.contains("Total count    =        10000"), "{text}");
+        std::fs::remove_dir_all(&dir).unwrap();
+        assert!(Summary::of(&new().unwrap()).p50.is_nan());
+    }
+}
