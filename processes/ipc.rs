@@ -213,13 +213,22 @@ pub fn rotation(
         .map_err(|e| anyhow::anyhow!("opening service '{}': {e:?}", service::ROTATION))
 }
 
+/// Entries of the world blackboard. Each servo incarnation writes the first entry no other
+/// holds: iceoryx2 0.10 keeps the write handle of a SIGKILLed writer registered after its
+/// node's clean-up (a new handle on that entry fails with `HandleAlreadyExists`), so a
+/// restarted servo takes the next entry, and a resuming one reads the newest snapshot of all.
+pub const WORLD_SLOTS: u64 = 64;
+
 /// Creates the world-state blackboard (the supervisor owns it, so it outlives a servo).
 pub fn create_world(node: &Node<Svc>) -> Result<blackboard::PortFactory<Svc, u64>> {
-    node.service_builder(&name(service::WORLD)?)
+    let mut b = node
+        .service_builder(&name(service::WORLD)?)
         .blackboard_creator::<u64>()
-        .max_readers(4)
-        .add::<WorldSnapshot>(0, WorldSnapshot::default())
-        .create()
+        .max_readers(4);
+    for k in 0..WORLD_SLOTS {
+        b = b.add::<WorldSnapshot>(k, WorldSnapshot::default());
+    }
+    b.create()
         .map_err(|e| anyhow::anyhow!("creating blackboard '{}': {e:?}", service::WORLD))
 }
 

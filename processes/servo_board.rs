@@ -298,8 +298,14 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
     };
     let world_entry = match &world_writer {
         Some(w) => Some(
-            w.entry::<WorldSnapshot>(&0)
-                .map_err(|e| anyhow::anyhow!("world entry: {e:?}"))?,
+            (0..ipc::WORLD_SLOTS)
+                .find_map(|k| w.entry::<WorldSnapshot>(&k).ok())
+                .with_context(|| {
+                    format!(
+                        "no free entry in the world blackboard ({} servo incarnations used them all)",
+                        ipc::WORLD_SLOTS
+                    )
+                })?,
         ),
         None => None,
     };
@@ -315,11 +321,18 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
             .reader_builder()
             .create()
             .map_err(|e| anyhow::anyhow!("world reader: {e:?}"))?;
-        let s = *reader
-            .entry::<WorldSnapshot>(&0)
-            .map_err(|e| anyhow::anyhow!("world entry: {e:?}"))?
-            .get();
-        if s.version == msg::VERSION {
+        // The newest snapshot any earlier incarnation left.
+        let mut newest: Option<WorldSnapshot> = None;
+        for k in 0..ipc::WORLD_SLOTS {
+            let s = *reader
+                .entry::<WorldSnapshot>(&k)
+                .map_err(|e| anyhow::anyhow!("world entry {k}: {e:?}"))?
+                .get();
+            if s.version == msg::VERSION && newest.is_none_or(|n| s.seq > n.seq) {
+                newest = Some(s);
+            }
+        }
+        if let Some(s) = newest {
             let face = |f: u64| usize::try_from(f).unwrap_or(usize::MAX);
             plant.restore(&PlantState {
                 time_s: s.time_s,
