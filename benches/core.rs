@@ -10,10 +10,9 @@
 //! two probes of 2 000 samples, the size the servo sends at 1 kHz).
 
 use afs_shared::friction::FrictionLaw;
-use afs_shared::math::{perp, unit};
 use afs_shared::servo::ServoInput;
 use afs_shared::sim::{Lockstep, SimConfig};
-use afs_shared::tangent::{self, HOLD, ProbeSample, TangentParams};
+use afs_shared::tangent::{self, ProbeModel, TangentParams};
 use afs_shared::tuner::{ThesisTunerParams, Tuner, TunerConfig, TunerInput};
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
@@ -82,36 +81,15 @@ fn benches(c: &mut Criterion) {
 
     let params = TangentParams::default();
     let plan = params.first_plan();
-    let (base, alpha0, k, preload) = (0.3f64, 3f64.to_radians(), 1400.0, 2.5);
-    let n_true = perp(unit(base - alpha0));
-    let mut rec = Vec::new();
-    for i in 0..200 {
-        let f = n_true * preload;
-        rec.push(ProbeSample {
-            t: i as f64 * 1e-3,
-            force: [f.x, f.y],
-            tip: [0.0, 0.0],
-            phase: 0.0,
-            probe: HOLD,
-            measured: false,
-        });
-    }
-    for (j, off) in plan.offsets[..plan.count].iter().enumerate() {
-        let dir = unit(base + off);
-        for i in 0..2000 {
-            let phase = std::f64::consts::TAU * i as f64 / 1000.0;
-            let tip = dir * (plan.amplitude_m * phase.sin());
-            let f = n_true * (preload - k * tip.dot(&n_true));
-            rec.push(ProbeSample {
-                t: i as f64 * 1e-3,
-                force: [f.x, f.y],
-                tip: [tip.x, tip.y],
-                phase,
-                probe: j as u8,
-                measured: true,
-            });
-        }
-    }
+    let model = ProbeModel {
+        alpha0: 3f64.to_radians(),
+        base: 0.3,
+        k: 1400.0,
+        noise: 0.02,
+        friction: 0.0,
+        preload: 2.5,
+    };
+    let (rec, base) = (model.record(&plan, 1), model.base);
     c.bench_function("tangent_estimate", |b| {
         b.iter(|| {
             black_box(tangent::estimate(

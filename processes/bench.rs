@@ -176,16 +176,7 @@ fn finish_part(
                 v["ratio_to_floor"] = json!(sum.ratio_to(&Summary::of(&f.hist)));
             } else if let Some(c) = consts.iter().find(|c| c.name == fl) {
                 v["floor"] = json!(format!("{} ({:.3} µs)", c.name, c.value_us));
-                let k = Summary {
-                    count: 1,
-                    p50: c.value_us,
-                    p90: c.value_us,
-                    p99: c.value_us,
-                    p99_9: c.value_us,
-                    p99_99: c.value_us,
-                    max: c.value_us,
-                };
-                v["ratio_to_floor"] = json!(sum.ratio_to(&k));
+                v["ratio_to_floor"] = json!(sum.ratio_to(&Summary::constant(c.value_us)));
             }
         }
         map.insert(s.name.into(), v);
@@ -292,7 +283,6 @@ const BARE_PING: &str = "afs/bench/bare_ping";
 const BARE_PONG: &str = "afs/bench/bare_pong";
 const EVENT_PING: &str = "afs/bench/ping_event";
 const EVENT_PONG: &str = "afs/bench/pong_event";
-const AFS_PING_EVENT_NOTE: &str = "the afs services with an iceoryx2 event per sample";
 
 /// The shared-memory page of the atomic ping-pong: a sequence number and a payload each way,
 /// on separate cache lines.
@@ -422,33 +412,37 @@ fn event(
 
 /// The initiator's ports (ping publishers, pong subscribers).
 fn initiator_ports(node: &Node<Svc>) -> Result<Ports> {
-    let e = |w: &'static str| move |x: &dyn std::fmt::Debug| anyhow::anyhow!("{w}: {x:?}");
     Ok(Ports {
         afs_wrench_pub: ipc::wrench(node)?
             .publisher_builder()
             .create()
-            .map_err(|x| e("wrench publisher")(&x))?,
+            .map_err(|x| ice("wrench publisher", x))?,
         afs_servo_sub: ipc::servo(node)?
             .subscriber_builder()
             .create()
-            .map_err(|x| e("servo subscriber")(&x))?,
+            .map_err(|x| ice("servo subscriber", x))?,
         bare_pub: bare_ping(node)?
             .publisher_builder()
             .create()
-            .map_err(|x| e("bare publisher")(&x))?,
+            .map_err(|x| ice("bare publisher", x))?,
         bare_sub: bare_pong(node)?
             .subscriber_builder()
             .create()
-            .map_err(|x| e("bare subscriber")(&x))?,
+            .map_err(|x| ice("bare subscriber", x))?,
         notifier: event(node, EVENT_PING)?
             .notifier_builder()
             .create()
-            .map_err(|x| e("notifier")(&x))?,
+            .map_err(|x| ice("notifier", x))?,
         listener: event(node, EVENT_PONG)?
             .listener_builder()
             .create()
-            .map_err(|x| e("listener")(&x))?,
+            .map_err(|x| ice("listener", x))?,
     })
+}
+
+/// An iceoryx2 error, with what failed.
+fn ice(what: &str, e: impl std::fmt::Debug) -> anyhow::Error {
+    anyhow::anyhow!("{what}: {e:?}")
 }
 
 /// Spins until `f` gives a value, or fails after [`ANSWER_TIMEOUT`] (the peer died).
@@ -606,8 +600,7 @@ fn pin_thread(cpu: usize) {
 
 fn hop(opts: &BenchOptions, stop: &AtomicBool) -> Result<Value> {
     let prefix = format!("{}h", opts.prefix);
-    refuse_live(&prefix)?;
-    let _ = ipc::remove_leftovers(&prefix);
+    ipc::claim_prefix(&prefix)?;
     let dir = std::env::temp_dir().join(format!("afs-bench-{prefix}-{}", std::process::id()));
     std::fs::create_dir_all(&dir)?;
     let sock_path = dir.join("ctl.sock");
@@ -673,7 +666,7 @@ fn hop(opts: &BenchOptions, stop: &AtomicBool) -> Result<Value> {
             let what = [
                 "shared-memory atomic ping-pong, busy-polling (the floor)",
                 "afs services and types (WrenchSample → ServoSample), busy-polling, sample gate",
-                AFS_PING_EVENT_NOTE,
+                "the afs services with an iceoryx2 event per sample",
                 "bare iceoryx2 publish-subscribe, same sizes, default settings, busy-polling",
                 "Unix-domain stream socket, blocking reads",
             ];
@@ -747,14 +740,6 @@ fn accept(listener: &UnixListener, peer: &mut Child) -> Result<UnixStream> {
     }
 }
 
-fn refuse_live(prefix: &str) -> Result<()> {
-    let c = ipc::census(prefix, false)?;
-    if !c.alive.is_empty() {
-        bail!("prefix '{prefix}' is in use by a running benchmark or stack; pass another --prefix");
-    }
-    Ok(())
-}
-
 /// A child killed when dropped (an error path unwinding past it).
 struct KillOnDrop(Child);
 
@@ -774,31 +759,30 @@ pub fn peer(prefix: &str, socket: &Path, cpu: Option<usize>) -> Result<()> {
         pin_thread(c);
     }
     let node = ipc::node(prefix, "bench-peer")?;
-    let e = |w: &'static str| move |x: &dyn std::fmt::Debug| anyhow::anyhow!("{w}: {x:?}");
     let wrench_sub = ipc::wrench(&node)?
         .subscriber_builder()
         .create()
-        .map_err(|x| e("wrench subscriber")(&x))?;
+        .map_err(|x| ice("wrench subscriber", x))?;
     let servo_pub = ipc::servo(&node)?
         .publisher_builder()
         .create()
-        .map_err(|x| e("servo publisher")(&x))?;
+        .map_err(|x| ice("servo publisher", x))?;
     let bare_sub = bare_ping(&node)?
         .subscriber_builder()
         .create()
-        .map_err(|x| e("bare subscriber")(&x))?;
+        .map_err(|x| ice("bare subscriber", x))?;
     let bare_pub = bare_pong(&node)?
         .publisher_builder()
         .create()
-        .map_err(|x| e("bare publisher")(&x))?;
+        .map_err(|x| ice("bare publisher", x))?;
     let listener = event(&node, EVENT_PING)?
         .listener_builder()
         .create()
-        .map_err(|x| e("listener")(&x))?;
+        .map_err(|x| ice("listener", x))?;
     let notifier = event(&node, EVENT_PONG)?
         .notifier_builder()
         .create()
-        .map_err(|x| e("notifier")(&x))?;
+        .map_err(|x| ice("notifier", x))?;
     let page = AtomicPage::open(prefix, false)?;
     let mut sock = UnixStream::connect(socket)
         .with_context(|| format!("connecting to {}", socket.display()))?;
@@ -837,7 +821,7 @@ pub fn peer(prefix: &str, socket: &Path, cpu: Option<usize>) -> Result<()> {
                     let recv = || -> Result<Option<WrenchSample>> {
                         Ok(wrench_sub
                             .receive()
-                            .map_err(|x| e("receive")(&x))?
+                            .map_err(|x| ice("receive", x))?
                             .map(|s| *s.payload()))
                     };
                     let w = if t == Transport::AfsEvent {
@@ -854,23 +838,23 @@ pub fn peer(prefix: &str, socket: &Path, cpu: Option<usize>) -> Result<()> {
                         force_age_ns: now.saturating_sub(w.publish_ns),
                         ..Default::default()
                     };
-                    servo_pub.send_copy(s).map_err(|x| e("send")(&x))?;
+                    servo_pub.send_copy(s).map_err(|x| ice("send", x))?;
                     if t == Transport::AfsEvent {
-                        notifier.notify().map_err(|x| e("notify")(&x))?;
+                        notifier.notify().map_err(|x| ice("notify", x))?;
                     }
                 }
                 Transport::BarePoll => {
                     let b = spin(|| {
                         Ok(bare_sub
                             .receive()
-                            .map_err(|x| e("receive")(&x))?
+                            .map_err(|x| ice("receive", x))?
                             .map(|s| *s.payload()))
                     })?;
                     let now = rt::monotonic_ns();
                     let mut r = [0u8; PONG];
                     put(&mut r, 0, get(&b, 0));
                     put(&mut r, 16, now.saturating_sub(get(&b, 8)));
-                    bare_pub.send_copy(r).map_err(|x| e("send")(&x))?;
+                    bare_pub.send_copy(r).map_err(|x| ice("send", x))?;
                 }
                 Transport::Uds => {
                     let mut b = [0u8; PING];
@@ -896,14 +880,15 @@ struct StackRun {
     age: Histogram<u64>,
 }
 
-fn run_stack(
+/// Runs a stack (`afs run` refuses a prefix in use) while `during` runs beside it; `during`
+/// is told through its flag when the stack has ended.
+fn run_stack<T: Send>(
     prefix: &str,
     duration_s: f64,
     dir: &Path,
     stop: &AtomicBool,
-    during: impl FnOnce(&AtomicBool) + Send,
-) -> Result<StackRun> {
-    refuse_live(prefix)?;
+    during: impl FnOnce(&AtomicBool) -> T + Send,
+) -> Result<(StackRun, T)> {
     let mut stack = StackFile::parse(DEFAULT_STACK, "(built-in)")?;
     stack.prefix = prefix.into();
     stack.scenario = "surface-tracking".into();
@@ -927,7 +912,7 @@ fn run_stack(
         .spawn()
         .context("starting afs run")?;
     let running = AtomicBool::new(true);
-    let out = std::thread::scope(|sc| {
+    let (out, beside) = std::thread::scope(|sc| {
         let h = sc.spawn(|| during(&running));
         let pid = child.id();
         // Forward a Ctrl-C to the stack.
@@ -946,11 +931,12 @@ fn run_stack(
         });
         let out = child.wait_with_output();
         running.store(false, Ordering::Relaxed);
-        let _ = h.join();
         let _ = watcher.join();
-        out
-    })
-    .context("waiting for afs run")?;
+        let beside = h.join();
+        (out, beside)
+    });
+    let out = out.context("waiting for afs run")?;
+    let beside = beside.map_err(|_| anyhow::anyhow!("the thread beside the stack panicked"))?;
     let report: Value = serde_json::from_slice(&out.stdout).with_context(|| {
         format!(
             "afs run gave no report; its stderr:\n{}",
@@ -962,7 +948,7 @@ fn run_stack(
     let age = hist::load(&hist_dir.join("force_age.hdr"))?;
     let _ = std::fs::remove_dir_all(&hist_dir);
     let _ = std::fs::remove_file(&file);
-    Ok(StackRun { report, wake, age })
+    Ok((StackRun { report, wake, age }, beside))
 }
 
 /// The bare absolute-time loop at the servo's priority and core, half a period out of phase
@@ -1034,17 +1020,11 @@ fn bare_loop(
             deadline = now - now % period + phase + period / 2 + period;
         }
     }
-    // Back to normal scheduling before the thread ends.
-    // SAFETY: plain syscall; SCHED_OTHER with priority 0.
-    unsafe {
-        let p = libc::sched_param { sched_priority: 0 };
-        libc::sched_setscheduler(0, libc::SCHED_OTHER, &p);
-    }
     Ok(h)
 }
 
-fn servo_spec(prefix: &str) -> Result<(usize, u8)> {
-    let _ = prefix;
+/// The built-in stack's servo CPU and priority.
+fn servo_spec() -> Result<(usize, u8)> {
     let s = StackFile::parse(DEFAULT_STACK, "(built-in)")?;
     let p = s
         .process
@@ -1062,17 +1042,12 @@ fn servo_spec(prefix: &str) -> Result<(usize, u8)> {
 fn jitter(opts: &BenchOptions, stop: &AtomicBool) -> Result<Value> {
     let prefix = format!("{}l", opts.prefix);
     let dir = scratch(&prefix)?;
-    let (cpu, prio) = servo_spec(&prefix)?;
-    let bare: std::sync::Mutex<Option<Result<Histogram<u64>>>> = std::sync::Mutex::new(None);
-    let run = run_stack(&prefix, opts.duration_s, &dir, stop, |running| {
-        let r = bare_loop(&prefix, cpu, prio, opts.duration_s, running);
-        *bare.lock().unwrap_or_else(|e| e.into_inner()) = Some(r);
+    let (cpu, prio) = servo_spec()?;
+    let (run, bare) = run_stack(&prefix, opts.duration_s, &dir, stop, |running| {
+        bare_loop(&prefix, cpu, prio, opts.duration_s, running)
     })?;
     let _ = std::fs::remove_dir_all(&dir);
-    let bare = bare
-        .into_inner()
-        .unwrap_or_else(|e| e.into_inner())
-        .context("the bare loop did not run")??;
+    let bare = bare.context("the bare loop")?;
     let series = vec![
         Series {
             name: "bare_loop_wake",
@@ -1137,7 +1112,7 @@ struct StackSums {
 }
 
 fn stack(opts: &BenchOptions, stop: &AtomicBool) -> Result<Value> {
-    let (cpu, _) = servo_spec(&opts.prefix)?;
+    let (cpu, _) = servo_spec()?;
     let other = if cpu == 0 { 1 } else { 0 };
     let can_hog = rt::available_cpus() > 1;
     // Alternating halves (A B A B) so that a noisy stretch of the machine falls on both kinds.
@@ -1161,7 +1136,7 @@ fn stack(opts: &BenchOptions, stop: &AtomicBool) -> Result<Value> {
         }
         let prefix = format!("{}s{i}", opts.prefix);
         let dir = scratch(&prefix)?;
-        let r = run_stack(&prefix, opts.duration_s / 2.0, &dir, stop, |running| {
+        let (r, ()) = run_stack(&prefix, opts.duration_s / 2.0, &dir, stop, |running| {
             if with_hog && can_hog {
                 hog(other, running);
             }

@@ -114,6 +114,19 @@ impl Summary {
         }
     }
 
+    /// A fixed value at every percentile (a floor such as a sampling period), µs.
+    pub fn constant(value_us: f64) -> Self {
+        Self {
+            count: 1,
+            p50: value_us,
+            p90: value_us,
+            p99: value_us,
+            p99_9: value_us,
+            p99_99: value_us,
+            max: value_us,
+        }
+    }
+
     /// Each percentile divided by the floor's.
     pub fn ratio_to(&self, floor: &Summary) -> Summary {
         Summary {
@@ -153,6 +166,7 @@ mod tests {
         assert!((s.max - 10_000.0).abs() <= 10.0, "{}", s.max);
         let r = s.ratio_to(&s);
         assert_eq!(r.p50, 1.0);
+        assert_eq!(s.ratio_to(&Summary::constant(2500.0)).p50, s.p50 / 2500.0);
         write_hgrm(&back, &dir.join("h.hgrm")).unwrap();
         let text = std::fs::read_to_string(dir.join("h.hgrm")).unwrap();
         assert!(text.contains("Total count    =        10000"), "{text}");

@@ -165,15 +165,20 @@ pub fn supervisor(
     status_stream(node, service::SUPERVISOR)
 }
 
-/// The tangent-estimation request-response service.
-pub fn tangent(
+/// An estimation service: requests are a slice of samples behind a header, one response each.
+/// Safe overflow both ways, 2 active requests per client, 4 clients, 2 servers.
+fn estimation_service<Sample, Header, Response>(
     node: &Node<Svc>,
-) -> Result<
-    request_response::PortFactory<Svc, [ProbeSample], TangentRequestHeader, TangentResponse, ()>,
-> {
-    node.service_builder(&name(service::TANGENT)?)
-        .request_response::<[ProbeSample], TangentResponse>()
-        .request_user_header::<TangentRequestHeader>()
+    service_name: &str,
+) -> Result<request_response::PortFactory<Svc, [Sample], Header, Response, ()>>
+where
+    Sample: std::fmt::Debug + ZeroCopySend + 'static,
+    Header: std::fmt::Debug + ZeroCopySend + 'static,
+    Response: std::fmt::Debug + ZeroCopySend + 'static,
+{
+    node.service_builder(&name(service_name)?)
+        .request_response::<[Sample], Response>()
+        .request_user_header::<Header>()
         .enable_safe_overflow_for_requests(true)
         .enable_safe_overflow_for_responses(true)
         .max_active_requests_per_client(2)
@@ -183,7 +188,16 @@ pub fn tangent(
         .max_clients(4)
         .max_nodes(8)
         .open_or_create()
-        .map_err(|e| anyhow::anyhow!("opening service '{}': {e:?}", service::TANGENT))
+        .map_err(|e| anyhow::anyhow!("opening service '{service_name}': {e:?}"))
+}
+
+/// The tangent-estimation request-response service.
+pub fn tangent(
+    node: &Node<Svc>,
+) -> Result<
+    request_response::PortFactory<Svc, [ProbeSample], TangentRequestHeader, TangentResponse, ()>,
+> {
+    estimation_service(node, service::TANGENT)
 }
 
 /// The rotation-centre request-response service.
@@ -198,19 +212,7 @@ pub fn rotation(
         (),
     >,
 > {
-    node.service_builder(&name(service::ROTATION)?)
-        .request_response::<[RotationSample], RotationResponse>()
-        .request_user_header::<RotationRequestHeader>()
-        .enable_safe_overflow_for_requests(true)
-        .enable_safe_overflow_for_responses(true)
-        .max_active_requests_per_client(2)
-        .max_loaned_requests(2)
-        .max_response_buffer_size(4)
-        .max_servers(2)
-        .max_clients(4)
-        .max_nodes(8)
-        .open_or_create()
-        .map_err(|e| anyhow::anyhow!("opening service '{}': {e:?}", service::ROTATION))
+    estimation_service(node, service::ROTATION)
 }
 
 /// Entries of the world blackboard. Each servo incarnation writes the first entry no other
@@ -252,6 +254,25 @@ pub struct NodeCensus {
     pub cleaned: usize,
     /// Dead nodes that could not be cleaned.
     pub failed: usize,
+}
+
+/// Takes `prefix` for a new stack (or benchmark): refuses it while any of its nodes is alive,
+/// and otherwise removes what dead ones left. Returns (dead nodes cleaned, files removed).
+pub fn claim_prefix(prefix: &str) -> Result<(usize, usize)> {
+    let census = census(prefix, true)?;
+    if !census.alive.is_empty() {
+        bail!(
+            "a stack with prefix '{prefix}' is already running ({}); stop it or choose another --prefix",
+            census
+                .alive
+                .iter()
+                .map(|(n, p)| format!("{n} pid {p}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    let stale = remove_leftovers(prefix)?;
+    Ok((census.cleaned, stale.len()))
 }
 
 /// Lists the nodes of stack `prefix`; with `clean`, removes the resources of dead ones.

@@ -240,10 +240,6 @@ fn quantiles(h: &Histogram<u64>) -> Quantiles {
     }
 }
 
-fn record(h: &mut Histogram<u64>, v: u64) {
-    hist::record(h, v);
-}
-
 /// Runs the board until the scenario ends, the duration passes or `stop` is set.
 pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
     let scenario = Scenario::new(&args.scenario, &args.base).map_err(anyhow::Error::msg)?;
@@ -480,7 +476,7 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
                     servo.set_tare(tare);
                     last_tare = tare;
                 }
-                record(&mut timing.age, age);
+                hist::record(&mut timing.age, age);
                 used = Some((w, age));
             }
             Err(v) => {
@@ -530,8 +526,8 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
 
         // Loop statistics.
         let exec = rt::monotonic_ns().saturating_sub(now);
-        record(&mut timing.wake, late);
-        record(&mut timing.exec, exec);
+        hist::record(&mut timing.wake, late);
+        hist::record(&mut timing.exec, exec);
         stats.ticks += 1;
         if late >= period_ns || exec >= period_ns {
             stats.misses += 1;

@@ -525,24 +525,10 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunOutcome> {
     }
 
     // The prefix must be free; a dead stack's leftovers are removed.
-    let census = ipc::census(&prefix, true)?;
-    if !census.alive.is_empty() {
-        bail!(
-            "a stack with prefix '{prefix}' is already running ({}); stop it or choose another --prefix",
-            census
-                .alive
-                .iter()
-                .map(|(n, p)| format!("{n} pid {p}"))
-                .collect::<Vec<_>>()
-                .join(", ")
-        );
-    }
-    let stale = ipc::remove_leftovers(&prefix)?;
-    if census.cleaned > 0 || !stale.is_empty() {
+    let (cleaned, removed) = ipc::claim_prefix(&prefix)?;
+    if cleaned > 0 || removed > 0 {
         eprintln!(
-            "afs: removed the leftovers of a dead stack '{prefix}' ({} nodes, {} files)",
-            census.cleaned,
-            stale.len()
+            "afs: removed the leftovers of a dead stack '{prefix}' ({cleaned} nodes, {removed} files)"
         );
     }
 

@@ -395,22 +395,22 @@ fn bad_input_is_refused_clearly() {
 #[test]
 fn the_estimator_board_answers_requests() {
     use afs::ipc;
-    use afs_shared::math::{Vec2, perp, unit};
+    use afs_shared::math::Vec2;
     use afs_shared::msg::{
         self, OUTCOME_BAD_REQUEST, OUTCOME_ESTIMATE, RotationRequestHeader, RotationSample,
         TangentRequestHeader,
     };
-    use afs_shared::tangent::{HOLD, ProbeSample, TangentParams};
+    use afs_shared::tangent::{ProbeModel, TangentParams};
     use iceoryx2::service::port_factory::PortFactory;
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let p = prefix("es");
     let _clean = CleanPrefix(p.clone());
-    let mut est = KillOnDrop(
+    let est = KillOnDrop(Some(
         Command::new(env!("CARGO_BIN_EXE_afs-estimator"))
             .args(["--prefix", &p])
             .spawn()
             .unwrap(),
-    );
+    ));
     let node = ipc::node(&p, "test-client").unwrap();
     let tangent_service = ipc::tangent(&node).unwrap();
     let rotation_service = ipc::rotation(&node).unwrap();
@@ -434,37 +434,16 @@ fn the_estimator_board_answers_requests() {
     // A rigid 1 mm stroke against a 1.4 kN/m spring, no noise.
     let params = TangentParams::default();
     let plan = params.first_plan();
-    let (base, alpha0, k, preload) = (0.3f64, 3f64.to_radians(), 1400.0, 2.5);
-    let n_true = perp(unit(base - alpha0));
-    let mut rec = Vec::new();
-    for i in 0..200 {
-        let f = n_true * preload;
-        rec.push(ProbeSample {
-            t: i as f64 * 1e-3,
-            force: [f.x, f.y],
-            tip: [0.0, 0.0],
-            phase: 0.0,
-            probe: HOLD,
-            measured: false,
-        });
-    }
-    for (j, off) in plan.offsets[..plan.count].iter().enumerate() {
-        let dir = unit(base + off);
-        for i in 0..2000 {
-            let phase = std::f64::consts::TAU * i as f64 / 1000.0;
-            let s = plan.amplitude_m * phase.sin();
-            let tip: Vec2 = dir * s;
-            let f = n_true * (preload - k * tip.dot(&n_true));
-            rec.push(ProbeSample {
-                t: i as f64 * 1e-3,
-                force: [f.x, f.y],
-                tip: [tip.x, tip.y],
-                phase,
-                probe: j as u8,
-                measured: true,
-            });
-        }
-    }
+    let model = ProbeModel {
+        alpha0: 3f64.to_radians(),
+        base: 0.3,
+        k: 1400.0,
+        noise: 0.0,
+        friction: 0.0,
+        preload: 2.5,
+    };
+    let (base, alpha0) = (model.base, model.alpha0);
+    let rec = model.record(&plan, 0);
     let ask = |header: TangentRequestHeader| {
         let mut req = client.loan_slice_uninit(rec.len()).unwrap();
         *req.user_header_mut() = header;
@@ -563,9 +542,9 @@ fn the_estimator_board_answers_requests() {
     drop(node);
     // SAFETY: signalling our own child.
     unsafe {
-        libc::kill(est.0.id() as i32, libc::SIGTERM);
+        libc::kill(est.id() as i32, libc::SIGTERM);
     }
-    let st = est.0.wait().unwrap();
+    let st = est.take().wait().unwrap();
     assert!(st.success(), "{st:?}");
     // The test's own node was a member of the domain: remove what the domain keeps.
     ipc::remove_leftovers(&p).unwrap();
@@ -573,13 +552,26 @@ fn the_estimator_board_answers_requests() {
 }
 
 /// A child process killed (and reaped) when a failed assertion unwinds past it.
-struct KillOnDrop(Child);
+struct KillOnDrop(Option<Child>);
+
+impl KillOnDrop {
+    fn id(&self) -> u32 {
+        self.0.as_ref().map_or(0, Child::id)
+    }
+
+    /// The child, no longer killed on drop.
+    fn take(mut self) -> Child {
+        self.0.take().expect("a child")
+    }
+}
 
 impl Drop for KillOnDrop {
     fn drop(&mut self) {
-        if let Ok(None) = self.0.try_wait() {
-            let _ = self.0.kill();
-            let _ = self.0.wait();
+        if let Some(c) = &mut self.0
+            && let Ok(None) = c.try_wait()
+        {
+            let _ = c.kill();
+            let _ = c.wait();
         }
     }
 }
@@ -635,7 +627,7 @@ fn killed_boards_are_restarted_and_the_world_resumes() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let run = KillOnDrop(run);
+    let run = KillOnDrop(Some(run));
     wait_running(&p, Duration::from_secs(60));
     for board in ["sensor", "servo"] {
         let pid = board_pid(&p, board);
@@ -654,9 +646,7 @@ fn killed_boards_are_restarted_and_the_world_resumes() {
         }
         std::thread::sleep(Duration::from_secs(1));
     }
-    let mut run = run;
-    let child = std::mem::replace(&mut run.0, Command::new("true").spawn().unwrap());
-    let out = finish(child, "afs run");
+    let out = finish(run.take(), "afs run");
     let r = json_of(&out);
     assert!(
         out.status.success(),

@@ -311,6 +311,25 @@ fn run() -> Result<ExitCode> {
     }
 }
 
+/// The `checks` of a report, one line each.
+fn print_checks(r: &serde_json::Value) {
+    let num = |v: &serde_json::Value| match v.as_f64() {
+        Some(x) if x.fract() == 0.0 && x.abs() < 1e15 => format!("{x:.0}"),
+        Some(x) => format!("{x:.4}"),
+        None => v.to_string(),
+    };
+    for c in r["checks"].as_array().into_iter().flatten() {
+        say!(
+            "  [{}] {}: {} {} {}",
+            if c["pass"] == true { "ok" } else { "FAIL" },
+            c["name"].as_str().unwrap_or(""),
+            num(&c["value"]),
+            c["relation"].as_str().unwrap_or(""),
+            num(&c["limit"]),
+        );
+    }
+}
+
 fn print_bench(r: &serde_json::Value) {
     for part in ["hop", "loop", "stack"] {
         let Some(series) = r[part]["series"].as_object() else {
@@ -377,22 +396,7 @@ fn print_human(r: &serde_json::Value) {
         r["timing"]["simulated_s"].as_f64().unwrap_or(0.0),
         r["timing"]["cpu_s"].as_f64().unwrap_or(0.0),
     );
-    if let Some(checks) = r["checks"].as_array() {
-        for c in checks {
-            say!(
-                "  [{}] {}: {:.4} {} {}",
-                if c["pass"].as_bool() == Some(true) {
-                    "ok"
-                } else {
-                    "FAIL"
-                },
-                c["name"].as_str().unwrap_or(""),
-                c["value"].as_f64().unwrap_or(f64::NAN),
-                c["relation"].as_str().unwrap_or(""),
-                c["limit"].as_f64().unwrap_or(f64::NAN),
-            );
-        }
-    }
+    print_checks(r);
 }
 
 fn print_run(r: &serde_json::Value) {
@@ -458,22 +462,7 @@ fn print_run(r: &serde_json::Value) {
             );
         }
     }
-    if let Some(checks) = r["checks"].as_array() {
-        for c in checks {
-            say!(
-                "  [{}] {}: {} {} {}",
-                if c["pass"].as_bool() == Some(true) {
-                    "ok"
-                } else {
-                    "FAIL"
-                },
-                c["name"].as_str().unwrap_or(""),
-                c["value"],
-                c["relation"].as_str().unwrap_or(""),
-                c["limit"]
-            );
-        }
-    }
+    print_checks(r);
 }
 
 fn print_status(v: &serde_json::Value) {

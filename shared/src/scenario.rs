@@ -9,7 +9,7 @@
 //! [`ScenarioReport`], so the real-time stack and its lockstep reference are measured by one
 //! piece of code and [`Agreement`] can compare them.
 
-use crate::experiments::{Tick, WindowSummary, corner_profile, sliding_periods, window};
+use crate::experiments::{Tick, WindowSummary, on_corner_profile, sliding_periods, window};
 use crate::msg::{self, PlantSample, SERVO_SAFE, ServoSample};
 use crate::plant::PlantTruth;
 use crate::servo::{EstimationCounters, ServoCore, ServoMode};
@@ -130,20 +130,10 @@ impl Scenario {
                 (Some(0.5 * wl), 400.0)
             }
             ScenarioKind::Corner => {
-                let vertices = corner_profile();
-                cfg.surface = Surface {
-                    frame: SurfaceFrame {
-                        origin_m: origin,
-                        angle_rad: 0.0,
-                    },
-                    shape: Shape::Polyline {
-                        vertices: vertices.clone(),
-                    },
-                };
-                cfg.start_u_m = vertices[0][0] + 0.002;
+                let (_, end) = on_corner_profile(&mut cfg);
                 cfg.servo.tuner = TunerConfig::Fixed;
                 cfg.servo.tracking.enabled = true;
-                (Some(vertices[vertices.len() - 1][0] - 0.002), 600.0)
+                (Some(end), 600.0)
             }
             ScenarioKind::FrictionSuppression => {
                 cfg.servo.tuner = TunerConfig::Cost(CostTunerParams::default());

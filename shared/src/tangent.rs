@@ -981,33 +981,45 @@ impl TangentRls {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use rand_chacha::ChaCha8Rng;
-    use rand_chacha::rand_core::SeedableRng;
-    use rand_distr::{Distribution, StandardNormal};
+/// A synthetic probe run of the contact model, at 1 kHz: a 200-sample hold at the preload,
+/// then each probe's whole periods. Normal force `preload − k·A·sin(α0 + δα)·sin φ` along the
+/// true normal, friction `μ F_N sgn(ṡ)` along the true tangent, Gaussian noise on both axes.
+/// For tests and benchmarks of the estimator (and for a client exercising the estimator board).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ProbeModel {
+    /// True tangent error α0 (rad).
+    pub alpha0: f64,
+    /// Estimated tangent angle θ̂ the probes are relative to (rad).
+    pub base: f64,
+    /// Contact stiffness k (N/m).
+    pub k: f64,
+    /// Force noise standard deviation per axis (N).
+    pub noise: f64,
+    /// Friction coefficient μ.
+    pub friction: f64,
+    /// Preload (N).
+    pub preload: f64,
+}
 
-    struct Synth {
-        alpha0: f64,
-        base: f64,
-        k: f64,
-        noise: f64,
-        friction: f64,
-        preload: f64,
-    }
-
-    /// Synthetic probe records: normal force `preload − k·A·sin(α0 + δα)·sin φ` along the true
-    /// normal, friction `μ F_N sgn(ṡ)` along the true tangent, noise on both axes.
-    fn record(s: &Synth, plan: &ProbePlan, seed: u64) -> Vec<ProbeSample> {
+impl ProbeModel {
+    /// The record of `plan` (noise drawn from `seed`).
+    pub fn record(&self, plan: &ProbePlan, seed: u64) -> Vec<ProbeSample> {
+        use rand_chacha::ChaCha8Rng;
+        use rand_chacha::rand_core::SeedableRng;
+        use rand_distr::{Distribution, StandardNormal};
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let theta = s.base - s.alpha0;
+        let mut nz = || -> Vec2 {
+            Vec2::new(
+                StandardNormal.sample(&mut rng),
+                StandardNormal.sample(&mut rng),
+            ) * self.noise
+        };
+        let theta = self.base - self.alpha0;
         let (t_true, n_true) = (unit(theta), perp(unit(theta)));
         let mut out = Vec::new();
         let rate = 1000.0;
         for k in 0..200 {
-            let nz = |r: &mut ChaCha8Rng| -> f64 { StandardNormal.sample(r) };
-            let f = n_true * s.preload + Vec2::new(nz(&mut rng), nz(&mut rng)) * s.noise;
+            let f = n_true * self.preload + nz();
             out.push(ProbeSample {
                 t: k as f64 / rate,
                 force: [f.x, f.y],
@@ -1017,20 +1029,17 @@ mod tests {
                 measured: false,
             });
         }
-        for p in 0..plan.count {
-            let dir = unit(s.base + plan.offsets[p]);
+        for p in 0..plan.count.min(MAX_PROBES) {
+            let dir = unit(self.base + plan.offsets[p]);
             let n = (plan.periods as f64 * rate / plan.frequency_hz) as usize;
             for k in 0..n {
                 let phase = std::f64::consts::TAU * k as f64 / (rate / plan.frequency_hz);
                 let disp = plan.amplitude_m * phase.sin();
                 let vel = phase.cos();
-                let beta = s.alpha0 + plan.offsets[p];
-                let fnn = s.preload - s.k * disp * beta.sin();
-                let fric = -s.friction * fnn * vel.signum();
-                let nz = |r: &mut ChaCha8Rng| -> f64 { StandardNormal.sample(r) };
-                let f = n_true * fnn
-                    + t_true * (fric * dir.dot(&t_true).signum())
-                    + Vec2::new(nz(&mut rng), nz(&mut rng)) * s.noise;
+                let beta = self.alpha0 + plan.offsets[p];
+                let fnn = self.preload - self.k * disp * beta.sin();
+                let fric = -self.friction * fnn * vel.signum();
+                let f = n_true * fnn + t_true * (fric * dir.dot(&t_true).signum()) + nz();
                 let tip = dir * disp;
                 out.push(ProbeSample {
                     t: k as f64 / rate,
@@ -1044,9 +1053,14 @@ mod tests {
         }
         out
     }
+}
 
-    fn synth(alpha0_deg: f64) -> Synth {
-        Synth {
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn synth(alpha0_deg: f64) -> ProbeModel {
+        ProbeModel {
             alpha0: alpha0_deg.to_radians(),
             base: 0.3,
             k: 1400.0,
@@ -1056,11 +1070,11 @@ mod tests {
         }
     }
 
-    fn run(s: &Synth, params: &TangentParams) -> (TangentOutcome, Option<TangentOutcome>) {
+    fn run(s: &ProbeModel, params: &TangentParams) -> (TangentOutcome, Option<TangentOutcome>) {
         let plan = params.first_plan();
-        let out = estimate(&record(s, &plan, 1), &plan, s.base, params, false);
+        let out = estimate(&s.record(&plan, 1), &plan, s.base, params, false);
         if let TangentOutcome::Reprobe { plan, .. } = out {
-            let second = estimate(&record(s, &plan, 2), &plan, s.base, params, true);
+            let second = estimate(&s.record(&plan, 2), &plan, s.base, params, true);
             (out, Some(second))
         } else {
             (out, None)
@@ -1181,7 +1195,7 @@ mod tests {
     fn friction_leakage_is_rejected() {
         let params = TangentParams::default();
         for a0 in [-4.0, 2.0, 6.0] {
-            let s = Synth {
+            let s = ProbeModel {
                 friction: 0.7,
                 ..synth(a0)
             };
@@ -1205,7 +1219,7 @@ mod tests {
         let params = TangentParams::default();
         let s = synth(82.5);
         let plan = params.first_plan();
-        let out = estimate(&record(&s, &plan, 3), &plan, s.base, &params, false);
+        let out = estimate(&s.record(&plan, 3), &plan, s.base, &params, false);
         assert!(
             matches!(
                 out,
@@ -1225,7 +1239,7 @@ mod tests {
     #[test]
     fn the_rms_is_not_biased_by_noise() {
         let params = TangentParams::default();
-        let s = Synth {
+        let s = ProbeModel {
             noise: 0.2,
             ..synth(2.0)
         };
@@ -1235,7 +1249,7 @@ mod tests {
         let seeds = 16;
         let mut mean_rms = 0.0;
         for seed in 0..seeds {
-            let rec = record(&s, &plan, seed);
+            let rec = s.record(&plan, seed);
             let stats = probe_stats(&rec, 0, plan.offsets[0], s.base, n, plan.periods, 0.0);
             mean_rms += stats.rms_n / seeds as f64;
         }
@@ -1243,7 +1257,7 @@ mod tests {
             (mean_rms - truth).abs() < 0.04 * truth,
             "{mean_rms} vs {truth}"
         );
-        let rec = record(&s, &plan, 0);
+        let rec = s.record(&plan, 0);
         let f: Vec<f64> = rec
             .iter()
             .filter(|r| r.probe == 0 && r.measured)
@@ -1258,12 +1272,12 @@ mod tests {
     #[test]
     fn contact_loss_is_an_error() {
         let params = TangentParams::default();
-        let s = Synth {
+        let s = ProbeModel {
             k: 40_000.0,
             ..synth(3.0)
         };
         let plan = params.first_plan();
-        let out = estimate(&record(&s, &plan, 5), &plan, s.base, &params, false);
+        let out = estimate(&s.record(&plan, 5), &plan, s.base, &params, false);
         assert!(
             matches!(
                 out,
@@ -1271,12 +1285,12 @@ mod tests {
             ),
             "{out:?}"
         );
-        let quiet = Synth {
+        let quiet = ProbeModel {
             k: 10.0,
             noise: 0.05,
             ..synth(3.0)
         };
-        let out = estimate(&record(&quiet, &plan, 6), &plan, quiet.base, &params, false);
+        let out = estimate(&quiet.record(&plan, 6), &plan, quiet.base, &params, false);
         assert!(
             matches!(
                 out,

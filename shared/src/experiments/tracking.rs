@@ -540,17 +540,13 @@ pub(crate) fn corner_profile() -> Vec<[f64; 2]> {
     v
 }
 
-/// Tracks the piecewise-linear profile through its four corners at 5 mm/s with the
-/// friction-suppression dither at 5 ẋ_o; reports per corner how it was detected (force limit or
-/// set-point drift), how far past it the tangent was re-acquired, and the worst transient.
-pub fn corners(opts: &Options) -> Result<Outcome<CornersSummary>, String> {
-    let v = 0.005;
+/// Puts `cfg` on the level corner profile at its surface origin, starting 2 mm past the first
+/// vertex; returns the vertices and where runs end (2 mm before the last vertex).
+pub(crate) fn on_corner_profile(cfg: &mut SimConfig) -> (Vec<[f64; 2]>, f64) {
     let vertices = corner_profile();
-    let mut cfg = config(opts, TunerConfig::Fixed);
-    let origin = cfg.surface.frame.origin_m;
     cfg.surface = crate::surface::Surface {
         frame: crate::surface::SurfaceFrame {
-            origin_m: origin,
+            origin_m: cfg.surface.frame.origin_m,
             angle_rad: 0.0,
         },
         shape: crate::surface::Shape::Polyline {
@@ -559,6 +555,16 @@ pub fn corners(opts: &Options) -> Result<Outcome<CornersSummary>, String> {
     };
     cfg.start_u_m = vertices[0][0] + 0.002;
     let end = vertices[vertices.len() - 1][0] - 0.002;
+    (vertices, end)
+}
+
+/// Tracks the piecewise-linear profile through its four corners at 5 mm/s with the
+/// friction-suppression dither at 5 ẋ_o; reports per corner how it was detected (force limit or
+/// set-point drift), how far past it the tangent was re-acquired, and the worst transient.
+pub fn corners(opts: &Options) -> Result<Outcome<CornersSummary>, String> {
+    let v = 0.005;
+    let mut cfg = config(opts, TunerConfig::Fixed);
+    let (vertices, end) = on_corner_profile(&mut cfg);
     let run = run_tracking(&cfg, v, end, 5.0 * v, 600.0)?;
     let preload = cfg.servo.hybrid.preload_n;
     let mut reports = Vec::new();
@@ -799,20 +805,8 @@ pub struct Fig53Summary {
 /// of the tangent, even from an initial estimate within 10 %).
 pub fn fig5_3(opts: &Options) -> Result<Outcome<Fig53Summary>, String> {
     let v = 0.005;
-    let vertices = corner_profile();
     let mut cfg = config(opts, TunerConfig::Fixed);
-    let origin = cfg.surface.frame.origin_m;
-    cfg.surface = crate::surface::Surface {
-        frame: crate::surface::SurfaceFrame {
-            origin_m: origin,
-            angle_rad: 0.0,
-        },
-        shape: crate::surface::Shape::Polyline {
-            vertices: vertices.clone(),
-        },
-    };
-    cfg.start_u_m = vertices[0][0] + 0.002;
-    let end = vertices[vertices.len() - 1][0] - 0.002;
+    let (vertices, end) = on_corner_profile(&mut cfg);
     let params = crate::correlation::CorrelationParams::default();
     // Least-squares quadratic of the true profile in x̃ = x/L, then 10 % off.
     let fit = {
