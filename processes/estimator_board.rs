@@ -17,6 +17,7 @@ use afs_shared::multicontact::estimate_rotation_centre;
 use afs_shared::scenario::ident_tick;
 use afs_shared::tangent;
 use anyhow::Result;
+use iceoryx2::port::update_connections::UpdateConnections;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
@@ -156,6 +157,10 @@ pub fn run(prefix: &str, stop: &AtomicBool) -> Result<EstimatorSummary> {
         let now = rt::monotonic_ns();
         if now >= next_report {
             next_report = now + 1_000_000_000;
+            // Drop the connections of clients that died (a killed servo): their files would
+            // otherwise stay until the next request.
+            let _ = tangent_server.update_connections();
+            let _ = rotation_server.update_connections();
             let id = ident.report();
             report.seq += 1;
             report.windows = id.windows as u64;

@@ -120,7 +120,9 @@ pub fn wrench(node: &Node<Svc>) -> Result<publish_subscribe::PortFactory<Svc, Wr
         .subscriber_max_buffer_size(WRENCH_BUFFER)
         .subscriber_max_borrowed_samples(4)
         .max_subscribers(8)
-        .max_publishers(2)
+        // The sensor, a restarted sensor whose predecessor is not cleaned up yet, and the
+        // bad-sample injector of `afs chaos`.
+        .max_publishers(3)
         .max_nodes(12)
         .open_or_create()
         .map_err(|e| anyhow::anyhow!("opening service '{}': {e:?}", service::WRENCH))
@@ -303,6 +305,80 @@ pub fn census(prefix: &str, clean: bool) -> Result<NodeCensus> {
         }
     }
     Ok(out)
+}
+
+/// Files of a running stack `prefix` that belong to no live process: the directories and
+/// monitors of dead nodes, and the data segments and connections of ports no live node owns.
+/// After a board dies and the supervisor has cleaned up, there are none; any left is a leak.
+/// A file must look stale in two scans 50 ms apart (a port being created is not a leak).
+pub fn stale_files(prefix: &str) -> Result<Vec<PathBuf>> {
+    let first = stale_scan(prefix)?;
+    std::thread::sleep(std::time::Duration::from_millis(50));
+    let second = stale_scan(prefix)?;
+    Ok(first.into_iter().filter(|f| second.contains(f)).collect())
+}
+
+fn stale_scan(prefix: &str) -> Result<Vec<PathBuf>> {
+    let files = leftovers(prefix);
+    let cfg = config(prefix)?;
+    let mut alive = Vec::new();
+    Node::<Svc>::list(&cfg, |state| {
+        if let NodeState::Alive(v) = &state
+            && let Ok(id) = u128::from_str_radix(&v.id().to_string(), 16)
+        {
+            alive.push(id.to_string());
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(|e| anyhow::anyhow!("listing iceoryx2 nodes of stack '{prefix}': {e:?}"))?;
+    let fp = file_prefix(prefix);
+    let stem = |f: &Path| -> Option<(String, String)> {
+        let name = f.file_name()?.to_str()?;
+        let rest = name.strip_prefix(&fp)?;
+        let (stem, ext) = rest.rsplit_once('.')?;
+        Some((stem.to_string(), ext.to_string()))
+    };
+    // Node directories are named by node id; port tags inside them by port id.
+    let node_of = |f: &Path| -> Option<String> {
+        let parent = f.parent()?;
+        (parent.parent()?.file_name()? == "nodes")
+            .then(|| parent.file_name()?.to_str().map(String::from))?
+    };
+    let mut live_ports = std::collections::HashSet::new();
+    for f in &files {
+        if let (Some(node), Some((port, ext))) = (node_of(f), stem(f))
+            && ext == "port_tag"
+            && alive.contains(&node)
+        {
+            live_ports.insert(port);
+        }
+    }
+    let mut stale = Vec::new();
+    for f in &files {
+        let Some((stem, ext)) = stem(f) else {
+            continue;
+        };
+        let dead = if let Some(node) = node_of(f) {
+            !alive.contains(&node)
+        } else {
+            match ext.as_str() {
+                "node_monitor" | "node_monitor_context" | "node_monitor_owner_lock" => {
+                    !alive.contains(&stem)
+                }
+                // <service>_<port>.data; <service>_<sender port>_<receiver port>.connection
+                "data" => stem
+                    .rsplit('_')
+                    .next()
+                    .is_some_and(|p| !live_ports.contains(p)),
+                "connection" => stem.rsplit('_').take(2).any(|p| !live_ports.contains(p)),
+                _ => false,
+            }
+        };
+        if dead {
+            stale.push(f.clone());
+        }
+    }
+    Ok(stale)
 }
 
 /// Files of stack `prefix` left in /dev/shm and under the iceoryx2 root.

@@ -4,6 +4,7 @@
 
 pub mod bench;
 pub mod board;
+pub mod chaos;
 pub mod estimator_board;
 pub mod experiment;
 pub mod hist;

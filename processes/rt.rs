@@ -60,8 +60,17 @@ pub struct RtReport {
 pub fn setup(priority: u8, lock_memory: bool, cpu: Option<usize>) -> RtReport {
     let mut r = RtReport::default();
     if lock_memory {
-        // SAFETY: plain syscall with flag arguments.
-        let rc = unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) };
+        // Everything mapped now is faulted in and locked. Later mappings are locked page by
+        // page as they are first touched (MCL_ONFAULT): a peer that restarts brings a new
+        // shared-memory segment of up to tens of MB, and populating all of it at connection
+        // time (plain MCL_FUTURE) stalled the servo's tick for milliseconds.
+        // SAFETY: plain syscalls with flag arguments.
+        let rc = unsafe {
+            match libc::mlockall(libc::MCL_CURRENT) {
+                0 => libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE | libc::MCL_ONFAULT),
+                e => e,
+            }
+        };
         if rc == 0 {
             r.mlocked = true;
         } else {

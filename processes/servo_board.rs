@@ -534,6 +534,12 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
         }
         if stats.ticks.is_multiple_of(1000) {
             publish_stats(&mut stats, &timing, &gate, &link, &servo, &stats_pub);
+        } else if stats.ticks % 1000 == 500 && matches!(link.state, Link::Idle) {
+            // Every 0.1 s, between requests: drop the connections of an estimator that died
+            // (a file pair per dead server) and connect a restarted one. Without a change
+            // this only reads the service's port list; with one it maps or unmaps a segment,
+            // as the next send would.
+            let _ = link.client.update_connections();
         }
         seq += 1;
         deadline += period_ns;

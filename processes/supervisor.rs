@@ -7,12 +7,14 @@
 //! Children get SIGTERM if the supervisor dies (`PR_SET_PDEATHSIG`); a supervisor that finds a
 //! dead stack's resources under its prefix removes them before starting.
 
+use crate::chaos::{Action, BoardView, Injector};
 use crate::ipc::{self, Svc};
 use crate::record::{Rec, RecordSummary, Recorder};
 use crate::rt;
+use afs_shared::faults::{self, Board, FaultFigures, FaultKind, FaultMonitor};
 use afs_shared::msg::{
     self, FRICTION_LAW_VALID, FRICTION_MU_VALID, FrictionReport, LoopStats, PlantSample,
-    ProcessStatus, ServoSample, SupervisorStatus, fixed_str,
+    ProcessStatus, ServoSample, SupervisorStatus, WRENCH_INJECTED, WrenchSample, fixed_str,
 };
 use afs_shared::scenario::{self, Agreement, Scenario, ScenarioReport};
 use afs_shared::sim::SimConfig;
@@ -183,6 +185,21 @@ pub struct RunOptions {
     pub record: Option<PathBuf>,
     /// Print a progress line every second on stderr.
     pub progress: bool,
+    /// Inject faults (`afs chaos`).
+    pub chaos: Option<ChaosOptions>,
+}
+
+/// What `afs chaos` injects.
+#[derive(Debug, Clone)]
+pub struct ChaosOptions {
+    /// Number of faults.
+    pub faults: usize,
+    /// Seed of the plan.
+    pub seed: u64,
+    /// Kinds to draw from.
+    pub kinds: Vec<FaultKind>,
+    /// Take the kinds in turn instead of at random.
+    pub in_turn: bool,
 }
 
 /// Loads the stack file with the overrides applied.
@@ -244,6 +261,8 @@ struct ExitRecord {
     at_s: f64,
     status: String,
     restarted: bool,
+    /// From the exit being seen to the restarted process's data flowing (ms).
+    back_ms: Option<f64>,
 }
 
 struct Proc {
@@ -257,7 +276,102 @@ struct Proc {
     exits: Vec<ExitRecord>,
     started: Instant,
     stalls: u32,
+    /// Consecutive deaths within [`CRASH_LOOP_UPTIME`] of the start: the backoff's exponent.
+    streak: u32,
+    /// When the last exit was seen.
+    exited_at: Option<Instant>,
+    /// When the current process's data started to flow.
+    data_since: Option<Instant>,
+    /// Frozen on purpose by the fault injector: no stall policy.
+    held: bool,
+    /// Restarts that injected faults cost, not held against `max_restarts`.
+    injected_budget: u32,
 }
+
+/// The first contact's transient is not a fault's: the normal force counts from here (s).
+const FAULT_SETTLE_S: f64 = 0.5;
+
+/// Shared memory and resident memory of a running stack, at one moment.
+#[derive(Debug, Clone, Serialize)]
+struct Footprint {
+    /// Wall time since the stack started (s).
+    at_s: f64,
+    /// iceoryx2 files of the prefix in /dev/shm and the iceoryx2 root.
+    shm_files: usize,
+    /// Their total size (bytes).
+    shm_bytes: u64,
+    /// Those of dead processes ([`ipc::stale_files`]): leaks.
+    stale_files: Vec<String>,
+    /// Resident memory of the supervisor (KiB): its heap and stacks (RssAnon), and all of it
+    /// (VmRSS, which also counts the pages of shared memory it has read so far).
+    supervisor_rss_kib: Rss,
+    /// Resident memory of the boards (KiB), servo, sensor and estimator summed.
+    boards_rss_kib: Rss,
+}
+
+/// Resident memory (KiB).
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+struct Rss {
+    /// Private: heap, stacks (RssAnon).
+    anon: u64,
+    /// All (VmRSS).
+    total: u64,
+}
+
+impl std::ops::Add for Rss {
+    type Output = Rss;
+    fn add(self, o: Rss) -> Rss {
+        Rss {
+            anon: self.anon + o.anon,
+            total: self.total + o.total,
+        }
+    }
+}
+
+impl Footprint {
+    fn now(prefix: &str, procs: &[Proc], t0: Instant) -> Self {
+        let files = ipc::leftovers(prefix);
+        let boards_rss_kib = procs
+            .iter()
+            .filter(|p| p.state == ProcState::Running)
+            .map(|p| rss_kib(p.pid()))
+            .fold(Rss::default(), |a, b| a + b);
+        let stale = ipc::stale_files(prefix).unwrap_or_default();
+        Footprint {
+            at_s: t0.elapsed().as_secs_f64(),
+            shm_files: files.len(),
+            stale_files: stale.iter().map(|f| f.display().to_string()).collect(),
+            shm_bytes: files
+                .iter()
+                .filter_map(|f| std::fs::metadata(f).ok())
+                .filter(|m| m.is_file())
+                .map(|m| m.len())
+                .sum(),
+            supervisor_rss_kib: rss_kib(std::process::id() as i32),
+            boards_rss_kib,
+        }
+    }
+}
+
+/// Resident memory of a process (KiB; 0 if unknown).
+fn rss_kib(pid: i32) -> Rss {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();
+    let field = |name: &str| {
+        status
+            .lines()
+            .find_map(|l| l.strip_prefix(name))
+            .and_then(|v| v.split_whitespace().next()?.parse().ok())
+            .unwrap_or(0)
+    };
+    Rss {
+        anon: field("RssAnon:"),
+        total: field("VmRSS:"),
+    }
+}
+
+/// A process that ran this long before dying is not crash-looping: its next restart waits the
+/// first backoff again.
+const CRASH_LOOP_UPTIME: Duration = Duration::from_secs(1);
 
 fn exit_code(st: &std::process::ExitStatus) -> i32 {
     st.code().unwrap_or_else(|| -st.signal().unwrap_or(0))
@@ -310,7 +424,37 @@ impl Proc {
         self.child = Some(child);
         self.state = ProcState::Running;
         self.started = Instant::now();
+        self.held = false;
+        // The estimator has no stream of its own to wait for: it serves from its start.
+        self.data_since = (self.spec.name == "estimator").then_some(self.started);
+        if self.data_since.is_some() {
+            self.data_flowing(self.started);
+        }
         Ok(())
+    }
+
+    /// The current process's data started to flow at `t`.
+    fn data_flowing(&mut self, t: Instant) {
+        self.data_since = Some(t);
+        if let (Some(at), Some(e)) = (self.exited_at, self.exits.last_mut())
+            && e.restarted
+            && e.back_ms.is_none()
+        {
+            e.back_ms = Some(t.duration_since(at).as_secs_f64() * 1e3);
+        }
+    }
+
+    fn view(&self) -> BoardView {
+        BoardView {
+            pid: if self.state == ProcState::Running {
+                self.pid()
+            } else {
+                0
+            },
+            up_for: self.started.elapsed(),
+            data_since: self.data_since,
+            stall_policy: self.spec.stall_ms > 0,
+        }
     }
 
     fn pid(&self) -> i32 {
@@ -521,8 +665,35 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunOutcome> {
             exits: Vec::new(),
             started: Instant::now(),
             stalls: 0,
+            streak: 0,
+            exited_at: None,
+            data_since: None,
+            held: false,
+            injected_budget: 0,
         });
     }
+    // The fault plan: between 1 s in and 1 s before the end.
+    let plan = match &opts.chaos {
+        Some(c) => {
+            if c.faults > MAX_FAULTS {
+                bail!(
+                    "{} faults are too many: at most {MAX_FAULTS} (one per {} ms of a day's run)",
+                    c.faults,
+                    86_400_000 / MAX_FAULTS
+                );
+            }
+            if duration < 3.0 {
+                bail!(
+                    "a chaos run needs at least 3 simulated seconds (faults fall between 1 s in and 1 s before the end); got {duration} s"
+                );
+            }
+            Some(
+                faults::plan(c.seed, c.faults, 1.0, duration - 1.0, &c.kinds, c.in_turn)
+                    .map_err(anyhow::Error::msg)?,
+            )
+        }
+        None => None,
+    };
 
     // The prefix must be free; a dead stack's leftovers are removed.
     let (cleaned, removed) = ipc::claim_prefix(&prefix)?;
@@ -589,6 +760,24 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunOutcome> {
         Some(p) => Some(Recorder::start(p)?),
         None => None,
     };
+    let mut injector = match plan {
+        Some(plan) => {
+            let publisher = ipc::wrench(&node)?
+                .publisher_builder()
+                .create()
+                .map_err(|e| anyhow::anyhow!("bad-sample publisher: {e:?}"))?;
+            let inj = Injector::new(plan, publisher);
+            for p in procs.iter_mut() {
+                for b in [Board::Servo, Board::Sensor, Board::Estimator] {
+                    if p.spec.name == b.name() {
+                        p.injected_budget = inj.planned_for(b);
+                    }
+                }
+            }
+            Some(inj)
+        }
+        None => None,
+    };
 
     let result = supervise(
         &mut procs,
@@ -606,6 +795,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunOutcome> {
             status: &status_pub,
         },
         &mut recorder,
+        injector.as_mut(),
     );
 
     // Shut down in order: the servo first (it holds the world), then the others.
@@ -626,6 +816,11 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunOutcome> {
         Some(r) => Some(r.finish()?),
         None => None,
     };
+    let chaos_run = injector.map(|inj| ChaosRun {
+        planned: inj.plan().len(),
+        records: inj.records().to_vec(),
+        bad_sent: inj.bad_samples(),
+    });
     drop((
         plant_sub,
         servo_sub,
@@ -722,6 +917,23 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunOutcome> {
             }
         }
     }
+    let fault_figures = run.faults.figures();
+    checks.push(Check {
+        name: "servo ticks whose force values were not finite".into(),
+        value: fault_figures.controller_non_finite as f64,
+        relation: "<=",
+        limit: 0.0,
+    });
+    let chaos_report = chaos_run.as_ref().map(|c| {
+        chaos_checks(
+            c,
+            &fault_figures,
+            &run.steady,
+            run.stats.as_ref(),
+            servo_restarted,
+            &mut checks,
+        )
+    });
     let passed = checks.iter().all(Check::pass) && !run.interrupted;
     let report = json!({
         "scenario": stack.scenario,
@@ -763,10 +975,162 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunOutcome> {
             "removed_by_name": removed.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
             "left": left.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
         },
+        "faults": fault_figures,
+        "chaos": chaos_report,
         "wall_s": run.wall_s,
     });
     Ok(RunOutcome { report, passed })
 }
+
+/// Most faults one chaos run takes.
+pub const MAX_FAULTS: usize = 10_000;
+
+/// What the injector did.
+struct ChaosRun {
+    planned: usize,
+    records: Vec<crate::chaos::FaultRecord>,
+    bad_sent: crate::chaos::BadCounts,
+}
+
+/// The checks of a chaos run (added to `checks`) and its report.
+fn chaos_checks(
+    c: &ChaosRun,
+    f: &FaultFigures,
+    steady: &[Option<Footprint>; 2],
+    stats: Option<&LoopStats>,
+    servo_restarted: bool,
+    checks: &mut Vec<Check>,
+) -> Value {
+    let mut check = |name: &str, value: f64, relation: &'static str, limit: f64| {
+        checks.push(Check {
+            name: name.into(),
+            value,
+            relation,
+            limit,
+        })
+    };
+    check(
+        "faults injected (of those planned)",
+        c.records.len() as f64,
+        ">=",
+        c.planned as f64,
+    );
+    let not_back = c
+        .records
+        .iter()
+        .filter(|r| r.pid != 0 && r.back_ms.is_none() && !r.note.contains("thawed"))
+        .count();
+    check(
+        "faulted boards that did not come back",
+        not_back as f64,
+        "<=",
+        0.0,
+    );
+    if f.safe_entries > 0 {
+        check(
+            "worst time from the last good force sample to the safe state (ms)",
+            f.safe_after_last_good_ms_max,
+            "<=",
+            2.0,
+        );
+    }
+    check(
+        "largest true normal force / preload (outside 0.5 s after a servo restart)",
+        f.normal_force_max_over_preload,
+        "<=",
+        2.0,
+    );
+    let sensor_back: Vec<f64> = c
+        .records
+        .iter()
+        .filter(|r| r.kind.starts_with("kill-sensor"))
+        .filter_map(|r| r.back_ms)
+        .collect();
+    let worst_sensor_back = sensor_back.iter().copied().fold(0.0, f64::max);
+    if !sensor_back.is_empty() {
+        check(
+            "worst time for a killed sensor's data to be back (ms)",
+            worst_sensor_back,
+            "<=",
+            500.0,
+        );
+    }
+    let b = &c.bad_sent;
+    let sent = b.nan + b.infinite + b.absurd + b.repeat + b.backwards + b.future;
+    let counted = stats.map(|s| {
+        json!({
+            "non_finite": s.bad_non_finite, "out_of_range": s.bad_out_of_range,
+            "seq_repeat": s.bad_seq_repeat, "seq_backwards": s.bad_seq_backwards,
+            "future": s.bad_future,
+        })
+    });
+    // The gate's counters live in the servo: a restarted servo starts them again.
+    if sent > 0
+        && !servo_restarted
+        && let Some(s) = stats
+    {
+        let miscount = (s.bad_non_finite as i64 - (b.nan + b.infinite) as i64).abs()
+            + (s.bad_out_of_range as i64 - b.absurd as i64).abs()
+            + ((s.bad_seq_repeat + s.bad_seq_backwards) as i64 - (b.repeat + b.backwards) as i64)
+                .abs()
+            + (s.bad_future as i64 - b.future as i64).abs();
+        check(
+            "bad samples sent but not counted by the servo's gate",
+            miscount as f64,
+            "<=",
+            0.0,
+        );
+    }
+    if let [Some(before), Some(after)] = steady {
+        check(
+            "iceoryx2 files of dead processes after the last fault",
+            after.stale_files.len() as f64,
+            "<=",
+            0.0,
+        );
+        check(
+            "supervisor heap growth over the faults (RssAnon, KiB)",
+            after.supervisor_rss_kib.anon as f64 - before.supervisor_rss_kib.anon as f64,
+            "<=",
+            RSS_GROWTH_LIMIT_KIB,
+        );
+    }
+    let back = |prefix: &str| -> Value {
+        let v: Vec<f64> = c
+            .records
+            .iter()
+            .filter(|r| r.kind.starts_with(prefix))
+            .filter_map(|r| r.back_ms)
+            .collect();
+        json!({
+            "count": v.len(),
+            "max_ms": v.iter().copied().fold(None, |m: Option<f64>, x| Some(m.map_or(x, |m| m.max(x)))),
+            "mean_ms": (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64),
+        })
+    };
+    let detected: Vec<f64> = c.records.iter().filter_map(|r| r.detected_ms).collect();
+    json!({
+        "planned": c.planned,
+        "injected": c.records.len(),
+        "faults": c.records,
+        "back_after_kill": {
+            "servo": back("kill-servo"),
+            "sensor": back("kill-sensor"),
+            "estimator": back("kill-estimator"),
+            "frozen_sensor": back("freeze-sensor"),
+            "frozen_estimator": back("freeze-estimator"),
+        },
+        "freeze_detected_ms_max": detected.iter().copied().fold(None, |m: Option<f64>, x| Some(m.map_or(x, |m| m.max(x)))),
+        "bad_samples": { "sent": c.bad_sent, "counted_by_last_servo": counted },
+        "steady_before_first_fault": steady[0],
+        "steady_after_last_fault": steady[1],
+    })
+}
+
+/// Heap the supervisor may gain over a chaos run (KiB): its scenario monitor keeps a track
+/// sample every 10 ms (≈ 5 KiB per simulated second), so a 2-minute run grows it by about
+/// 0.6 MiB; a leak per fault would show as far more.
+const RSS_GROWTH_LIMIT_KIB: f64 = 8192.0;
 
 struct Ports<'a> {
     plant: &'a iceoryx2::port::subscriber::Subscriber<Svc, PlantSample, ()>,
@@ -779,6 +1143,9 @@ struct Ports<'a> {
 
 struct Supervised {
     monitor: scenario::ScenarioMonitor,
+    faults: FaultMonitor,
+    /// Resources while the stack was steady before the first fault and after the last.
+    steady: [Option<Footprint>; 2],
     joiner: Joiner,
     stats: Option<LoopStats>,
     friction: Option<FrictionReport>,
@@ -798,10 +1165,13 @@ fn supervise(
     progress: bool,
     ports: Ports<'_>,
     recorder: &mut Option<Recorder>,
+    mut chaos: Option<&mut Injector>,
 ) -> Result<Supervised> {
     let t0 = Instant::now();
     let mut out = Supervised {
         monitor: scenario.monitor(),
+        faults: FaultMonitor::new(scenario.cfg.servo.hybrid.preload_n, FAULT_SETTLE_S),
+        steady: [None, None],
         joiner: Joiner::default(),
         stats: None,
         friction: None,
@@ -827,6 +1197,8 @@ fn supervise(
     let mut last_wrench_at = Instant::now();
     let mut last_friction_at = Instant::now();
     let mut last_time_s = 0.0f64;
+    let mut servo_mode = 0u32;
+    let mut genuine: Option<WrenchSample> = None;
     // Wall-clock limit: the simulated duration plus generous start-up and restart slack.
     let limit = Duration::from_secs_f64(duration * 1.5 + 30.0);
     loop {
@@ -839,6 +1211,12 @@ fn supervise(
         while let Ok(Some(s)) = ports.plant.receive() {
             let p = *s.payload();
             last_plant_at = Instant::now();
+            if let Some(sv) = procs.iter_mut().find(|q| q.spec.name == "servo")
+                && sv.data_since.is_none()
+                && sv.state == ProcState::Running
+            {
+                sv.data_flowing(last_plant_at);
+            }
             last_time_s = p.time_s;
             if let Some(r) = recorder.as_mut() {
                 r.push(Rec::Plant(p));
@@ -847,16 +1225,32 @@ fn supervise(
         }
         while let Ok(Some(s)) = ports.servo.receive() {
             let v = *s.payload();
+            servo_mode = v.mode;
             if let Some(r) = recorder.as_mut() {
                 r.push(Rec::Servo(v));
             }
             out.joiner.push_servo(v);
         }
-        let monitor = &mut out.monitor;
-        out.joiner.pairs(|p, s| monitor.push(p, s));
+        let (monitor, fm) = (&mut out.monitor, &mut out.faults);
+        out.joiner.pairs(|p, s| {
+            monitor.push(p, s);
+            fm.push(p, s);
+        });
         while let Ok(Some(s)) = ports.wrench.receive() {
-            last_wrench_at = Instant::now();
+            let w = *s.payload();
             out.wrench_received += 1;
+            if w.flags & WRENCH_INJECTED == 0 {
+                last_wrench_at = Instant::now();
+                let new_epoch = genuine.is_none_or(|g| w.epoch_ns != g.epoch_ns);
+                genuine = Some(w);
+                if new_epoch
+                    && let Some(sn) = procs
+                        .iter_mut()
+                        .find(|q| q.spec.name == "sensor" && q.state == ProcState::Running)
+                {
+                    sn.data_flowing(last_wrench_at);
+                }
+            }
             if let Some(r) = recorder.as_mut() {
                 r.push(Rec::Wrench(*s.payload()));
             }
@@ -875,6 +1269,47 @@ fn supervise(
             }
         }
 
+        // Faults.
+        if let Some(inj) = chaos.as_deref_mut() {
+            let mut views = [BoardView::default(); 3];
+            for b in [Board::Servo, Board::Sensor, Board::Estimator] {
+                if let Some(p) = procs.iter().find(|p| p.spec.name == b.name()) {
+                    views[b as usize] = p.view();
+                }
+            }
+            let all_up = views.iter().all(|v| {
+                v.pid != 0
+                    && v.data_since
+                        .is_some_and(|t| t.elapsed() > Duration::from_millis(500))
+            });
+            if all_up && inj.idle() {
+                let slot = if inj.records().is_empty() {
+                    0
+                } else if inj.done() {
+                    1
+                } else {
+                    2
+                };
+                if slot < 2 && out.steady[slot].is_none() {
+                    out.steady[slot] = Some(Footprint::now(launch.prefix, procs, t0));
+                }
+            }
+            for a in inj.step(last_time_s, servo_mode, &views, genuine.as_ref()) {
+                match a {
+                    Action::Signal(b, sig) => {
+                        if let Some(p) = procs.iter().find(|p| p.spec.name == b.name()) {
+                            p.signal(sig);
+                        }
+                    }
+                    Action::Hold(b, h) => {
+                        if let Some(p) = procs.iter_mut().find(|p| p.spec.name == b.name()) {
+                            p.held = h;
+                        }
+                    }
+                }
+            }
+        }
+
         // Children.
         let now = Instant::now();
         let at_s = t0.elapsed().as_secs_f64();
@@ -885,6 +1320,9 @@ fn supervise(
                 if let Some(st) = exited {
                     p.child = None;
                     p.last_exit = Some(exit_code(&st));
+                    p.exited_at = Some(now);
+                    p.data_since = None;
+                    p.held = false;
                     let ok = st.code() == Some(0);
                     if p.spec.name == "servo" && ok {
                         servo_done = true;
@@ -893,6 +1331,7 @@ fn supervise(
                             at_s,
                             status: describe(&st),
                             restarted: false,
+                            back_ms: None,
                         });
                         continue;
                     }
@@ -900,14 +1339,19 @@ fn supervise(
                         Restart::Always => true,
                         Restart::OnFailure => !ok,
                         Restart::Never => false,
-                    } && p.restarts < p.spec.max_restarts;
+                    } && p.restarts < p.spec.max_restarts + p.injected_budget;
                     p.exits.push(ExitRecord {
                         at_s,
                         status: describe(&st),
                         restarted: restart,
+                        back_ms: None,
                     });
                     if restart {
-                        let backoff = (p.spec.backoff_ms << p.restarts.min(6)).min(2000);
+                        if p.started.elapsed() >= CRASH_LOOP_UPTIME {
+                            p.streak = 0;
+                        }
+                        let backoff = (p.spec.backoff_ms << p.streak.min(6)).min(2000);
+                        p.streak += 1;
                         p.state = ProcState::Waiting;
                         p.restart_at = Some(now + Duration::from_millis(backoff));
                     } else {
@@ -937,6 +1381,7 @@ fn supervise(
                     let stall = Duration::from_millis(p.spec.stall_ms);
                     let grace = Duration::from_secs(if p.spec.name == "servo" { 5 } else { 2 });
                     if p.spec.stall_ms > 0
+                        && !p.held
                         && now.duration_since(since.max(p.started)) > stall
                         && p.started.elapsed() > grace
                     {
@@ -954,6 +1399,9 @@ fn supervise(
                 p.restarts += 1;
                 p.restart_at = None;
                 let resume = p.spec.name == "servo";
+                if resume && let Some(last) = out.joiner.last_plant {
+                    out.faults.servo_restarted_at(last + 1);
+                }
                 if let Err(e) = p.spawn(launch, resume) {
                     eprintln!("afs: restarting {}: {e:#}", p.spec.name);
                     p.state = ProcState::Failed;
@@ -1040,8 +1488,11 @@ fn supervise(
     while let Ok(Some(s)) = ports.servo.receive() {
         out.joiner.push_servo(*s.payload());
     }
-    let monitor = &mut out.monitor;
-    out.joiner.pairs(|p, s| monitor.push(p, s));
+    let (monitor, fm) = (&mut out.monitor, &mut out.faults);
+    out.joiner.pairs(|p, s| {
+        monitor.push(p, s);
+        fm.push(p, s);
+    });
     while let Ok(Some(s)) = ports.friction.receive() {
         out.friction = Some(*s.payload());
     }

@@ -7,6 +7,7 @@
 use afs::experiment;
 use afs::supervisor;
 use afs_shared::experiments::{NAMES, Options};
+use afs_shared::faults::FaultKind;
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
@@ -26,6 +27,67 @@ macro_rules! say {
 struct Cli {
     #[command(subcommand)]
     command: Command,
+}
+
+/// The options of `afs run` (and `afs chaos`).
+#[derive(clap::Args)]
+struct RunArgs {
+    /// Stack file (processes, priorities, CPUs, restart policy, prefix); default: the
+    /// built-in one (examples/stack.toml).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// surface-tracking, corner, friction-suppression or friction-id.
+    #[arg(long)]
+    scenario: Option<String>,
+    /// Simulated seconds (0: the scenario's own length).
+    #[arg(long)]
+    duration: Option<f64>,
+    /// Stack prefix (isolates the shared memory of concurrent stacks).
+    #[arg(long)]
+    prefix: Option<String>,
+    /// Seed of the sensor noise (`afs chaos`: also of the fault plan).
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Record every topic to this MCAP file (Foxglove opens it).
+    #[arg(long)]
+    record: Option<PathBuf>,
+    /// Print the summary as one JSON object.
+    #[arg(long)]
+    json: bool,
+    /// No progress line on stderr.
+    #[arg(long)]
+    quiet: bool,
+}
+
+/// Runs a stack (with faults if `chaos` is set) and prints its summary.
+fn run_stack(a: RunArgs, chaos: Option<supervisor::ChaosOptions>) -> Result<ExitCode> {
+    if let Some(d) = a.duration
+        && !(d.is_finite() && d >= 0.0)
+    {
+        anyhow::bail!("--duration {d} must be a number of seconds ≥ 0");
+    }
+    let stop = afs::board::stop_flag()?;
+    let opts = supervisor::RunOptions {
+        config: a.config,
+        scenario: a.scenario,
+        duration: a.duration,
+        prefix: a.prefix,
+        seed: a.seed,
+        record: a.record,
+        progress: !a.quiet,
+        chaos,
+    };
+    let outcome = supervisor::run(&opts, &stop)?;
+    if a.json {
+        say!("{}", serde_json::to_string_pretty(&outcome.report)?);
+    } else {
+        print_run(&outcome.report);
+    }
+    Ok(if outcome.passed {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
 }
 
 #[derive(Subcommand)]
@@ -62,31 +124,32 @@ enum Command {
     /// scenario's lockstep reference and their agreement, the servo loop's statistics.
     /// Exits with status 1 if a check fails, 2 on an error; Ctrl-C stops the stack in order.
     Run {
-        /// Stack file (processes, priorities, CPUs, restart policy, prefix); default: the
-        /// built-in one (examples/stack.toml).
+        #[command(flatten)]
+        run: RunArgs,
+    },
+    /// Run a scenario on the process graph while injecting faults into it.
+    ///
+    /// Kills (SIGKILL) the servo, sensor and estimator at random moments, also while the
+    /// servo dithers to probe the tangent and while the estimator holds a request; freezes
+    /// (SIGSTOP) the sensor and the estimator; sends bursts of bad force samples (NaN,
+    /// infinite, absurd, repeated, backwards, from the future). The summary adds each fault's
+    /// recovery, the safe-state latency, the largest normal force, the bad samples sent and
+    /// counted, and shared and resident memory before and after (docs/reliability.md).
+    /// Exits with status 1 if a check fails, 2 on an error.
+    Chaos {
+        #[command(flatten)]
+        run: RunArgs,
+        /// Number of faults, spread over the run (between 1 s in and 1 s before the end).
+        #[arg(long, default_value_t = 10)]
+        kills: usize,
+        /// Fault kinds to draw from, comma-separated (default: all): kill-servo, kill-sensor,
+        /// kill-estimator, kill-servo-mid-probe, kill-sensor-mid-probe,
+        /// kill-estimator-mid-request, freeze-sensor, freeze-estimator, bad-samples.
+        #[arg(long, value_delimiter = ',')]
+        faults: Vec<String>,
+        /// Take the --faults kinds in turn, in the order given, instead of at random.
         #[arg(long)]
-        config: Option<PathBuf>,
-        /// surface-tracking, corner, friction-suppression or friction-id.
-        #[arg(long)]
-        scenario: Option<String>,
-        /// Simulated seconds (0: the scenario's own length).
-        #[arg(long)]
-        duration: Option<f64>,
-        /// Stack prefix (isolates the shared memory of concurrent stacks).
-        #[arg(long)]
-        prefix: Option<String>,
-        /// Seed of the sensor noise.
-        #[arg(long)]
-        seed: Option<u64>,
-        /// Record every topic to this MCAP file (Foxglove opens it).
-        #[arg(long)]
-        record: Option<PathBuf>,
-        /// Print the summary as one JSON object.
-        #[arg(long)]
-        json: bool,
-        /// No progress line on stderr.
-        #[arg(long)]
-        quiet: bool,
+        in_turn: bool,
     },
     /// Show a running stack's processes, health and loop statistics.
     Status {
@@ -209,42 +272,31 @@ fn run() -> Result<ExitCode> {
                 ExitCode::from(1)
             })
         }
-        Command::Run {
-            config,
-            scenario,
-            duration,
-            prefix,
-            seed,
-            record,
-            json,
-            quiet,
+        Command::Run { run } => run_stack(run, None),
+        Command::Chaos {
+            run,
+            kills,
+            faults,
+            in_turn,
         } => {
-            if let Some(d) = duration
-                && !(d.is_finite() && d >= 0.0)
-            {
-                anyhow::bail!("--duration {d} must be a number of seconds ≥ 0");
-            }
-            let stop = afs::board::stop_flag()?;
-            let opts = supervisor::RunOptions {
-                config,
-                scenario,
-                duration,
-                prefix,
-                seed,
-                record,
-                progress: !quiet,
+            let kinds = if faults.is_empty() {
+                FaultKind::ALL.iter().map(|(_, k)| *k).collect()
+            } else {
+                faults
+                    .iter()
+                    .map(|f| FaultKind::from_name(f.trim()).map_err(anyhow::Error::msg))
+                    .collect::<Result<Vec<_>>>()?
             };
-            let outcome = supervisor::run(&opts, &stop)?;
-            if json {
-                say!("{}", serde_json::to_string_pretty(&outcome.report)?);
-            } else {
-                print_run(&outcome.report);
-            }
-            Ok(if outcome.passed {
-                ExitCode::SUCCESS
-            } else {
-                ExitCode::from(1)
-            })
+            let seed = run.seed.unwrap_or(1);
+            run_stack(
+                run,
+                Some(supervisor::ChaosOptions {
+                    faults: kills,
+                    seed,
+                    kinds,
+                    in_turn,
+                }),
+            )
         }
         Command::Status { prefix, json } => {
             let v = supervisor::status(&prefix, std::time::Duration::from_secs(2))?;
@@ -461,6 +513,26 @@ fn print_run(r: &serde_json::Value) {
                 }
             );
         }
+    }
+    if let Some(c) = r["chaos"].as_object() {
+        say!(
+            "  faults: {} of {} injected; back after a kill (max ms): servo {}, sensor {}, estimator {}",
+            c["injected"],
+            c["planned"],
+            c["back_after_kill"]["servo"]["max_ms"],
+            c["back_after_kill"]["sensor"]["max_ms"],
+            c["back_after_kill"]["estimator"]["max_ms"],
+        );
+    }
+    let fl = &r["faults"];
+    if fl.is_object() {
+        say!(
+            "  safe state: {} entries, worst {:.2} ms after the last good force sample; largest normal force {:.2} N ({:.2}× preload)",
+            fl["safe_entries"],
+            f(&fl["safe_after_last_good_ms_max"]),
+            f(&fl["normal_force_max_n"]),
+            f(&fl["normal_force_max_over_preload"]),
+        );
     }
     print_checks(r);
 }

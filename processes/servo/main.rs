@@ -23,7 +23,7 @@ struct Cli {
     #[arg(long)]
     resume: bool,
     /// Largest age of force data at use (ms) before the safe state.
-    #[arg(long, default_value_t = 2.0)]
+    #[arg(long, default_value_t = 1.5)]
     max_force_age_ms: f64,
     /// Seconds the estimator has to answer before the request is re-sent.
     #[arg(long, default_value_t = 1.0)]

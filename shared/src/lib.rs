@@ -5,6 +5,7 @@ pub mod arm;
 pub mod correlation;
 pub mod dither;
 pub mod experiments;
+pub mod faults;
 pub mod friction;
 pub mod hybrid;
 pub mod ident;

@@ -109,6 +109,9 @@ impl PlantSample {
 
 /// Flag of [`WrenchSample::flags`]: an axis hit its rated range.
 pub const WRENCH_SATURATED: u32 = 1;
+/// [`WrenchSample::flags`]: a bad sample `afs chaos` injected (for the recording and the
+/// supervisor; the servo's gate judges samples by their content, never by this flag).
+pub const WRENCH_INJECTED: u32 = 1 << 31;
 
 /// One force-sensor sample.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]

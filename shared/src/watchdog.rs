@@ -4,7 +4,8 @@
 //! is right, every value is finite and within the sensor's rated range, its sequence number
 //! moves forward (a later sensor epoch, i.e. a restarted sensor, starts a new sequence), and
 //! its timestamp is not in the future. At each tick the servo asks for the newest accepted
-//! sample; if it is older than the age limit (default 2 ms) or none was ever accepted, the
+//! sample; if it is older than the age limit (default 1.5 ms, so that the servo is safe within 2 ms of the last good
+//! sample: the limit, plus one 0.1-ms tick, plus the wake latency) or none was ever accepted, the
 //! verdict says so and the servo goes to its safe state. Rejected samples never reach the
 //! controller as values; each is counted by kind.
 
@@ -51,7 +52,7 @@ pub struct GateParams {
 impl Default for GateParams {
     fn default() -> Self {
         Self {
-            max_age_ns: 2_000_000,
+            max_age_ns: 1_500_000,
             force_limit_n: 130.0,
             torque_limit_nm: 10.0,
             future_tolerance_ns: 50_000,
@@ -207,10 +208,10 @@ mod tests {
         assert_eq!(g.offer(&sample(0, 10_000), 10_100), Verdict::Ok);
         assert_eq!(g.current(10_100).map(|x| x.1), Ok(100));
         assert_eq!(
-            g.current(10_000 + 2_000_000),
-            Ok((sample(0, 10_000), 2_000_000))
+            g.current(10_000 + 1_500_000),
+            Ok((sample(0, 10_000), 1_500_000))
         );
-        assert_eq!(g.current(10_000 + 2_000_001), Err(Verdict::Stale));
+        assert_eq!(g.current(10_000 + 1_500_001), Err(Verdict::Stale));
     }
 
     /// Each kind of bad sample is refused, counted, and leaves the newest good one in place.

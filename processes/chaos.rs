@@ -1,0 +1,412 @@
+//! `afs chaos`: a stack run with faults injected into it, to the plan of
+//! [`afs_shared::faults::plan`].
+//!
+//! The [`Injector`] lives in the supervisor's loop (every 5 ms): it decides when a planned
+//! fault is due (simulated time, and the servo's mode for the mid-probe and mid-request
+//! kinds), returns the signals to send, publishes the bad force samples itself, and times the
+//! recovery (until the killed board's data flows again). One fault is in progress at a time; a
+//! fault waits until its board has run for [`MIN_UPTIME`].
+
+use crate::ipc::Svc;
+use crate::rt;
+use afs_shared::faults::{BadSample, Board, FaultKind, PlannedFault};
+use afs_shared::msg::{WRENCH_INJECTED, WrenchSample};
+use iceoryx2::port::publisher::Publisher;
+use serde::Serialize;
+use std::time::{Duration, Instant};
+
+/// A board is only faulted again after it has run this long.
+pub const MIN_UPTIME: Duration = Duration::from_millis(500);
+/// A frozen board with no stall policy gets SIGCONT after this long.
+const THAW_AFTER: Duration = Duration::from_secs(1);
+/// Most simulated time to wait for the servo to probe (mid-probe and mid-request kinds).
+const PROBE_WAIT_S: f64 = 15.0;
+/// Most wall time to wait for a frozen estimator to receive the request.
+const REQUEST_WAIT: Duration = Duration::from_secs(15);
+/// Time from seeing the servo await the estimate to the kill: the request is copied and sent
+/// within a few ticks (ms).
+const REQUEST_KILL_DELAY: Duration = Duration::from_millis(50);
+/// Most wall time to wait for a faulted board to be back.
+const RECOVERY_WAIT: Duration = Duration::from_secs(20);
+/// Servo mode code while it dithers to probe the tangent.
+const MODE_PROBING: u32 = 2;
+/// Servo mode code while it waits for the estimator's answer.
+const MODE_AWAITING: u32 = 3;
+
+/// What the supervisor knows of a board.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct BoardView {
+    /// Its pid (0: none running).
+    pub pid: i32,
+    /// How long the current process has run.
+    pub up_for: Duration,
+    /// When the current process's data started to flow (sensor: its first wrench sample;
+    /// servo: its first world sample; estimator: its start).
+    pub data_since: Option<Instant>,
+    /// The supervisor kills it when silent (`stall_ms` > 0).
+    pub stall_policy: bool,
+}
+
+/// What the supervisor is asked to do.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Action {
+    /// Send a signal to the board's process.
+    Signal(Board, i32),
+    /// Exempt the board from the stall policy (the injector holds it frozen on purpose) or not.
+    Hold(Board, bool),
+}
+
+/// One fault as it went.
+#[derive(Debug, Clone, Serialize)]
+pub struct FaultRecord {
+    /// The kind's name.
+    pub kind: &'static str,
+    /// Planned simulated time (s).
+    pub due_s: f64,
+    /// Simulated time of the injection (s).
+    pub injected_at_s: f64,
+    /// Wall time of the injection since the stack started (s).
+    pub wall_s: f64,
+    /// The process signalled.
+    pub pid: i32,
+    /// The servo's mode at the injection (2: probing, 3: awaiting the estimate).
+    pub servo_mode: u32,
+    /// A frozen board: time until the supervisor's stall policy killed it (ms).
+    pub detected_ms: Option<f64>,
+    /// Time from the fault to the board's data flowing again (ms).
+    pub back_ms: Option<f64>,
+    /// Anything unusual.
+    pub note: String,
+}
+
+/// Bad samples sent, by kind.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct BadCounts {
+    /// NaN.
+    pub nan: u64,
+    /// Infinite.
+    pub infinite: u64,
+    /// Beyond the rated range.
+    pub absurd: u64,
+    /// The newest genuine sample again.
+    pub repeat: u64,
+    /// An earlier epoch.
+    pub backwards: u64,
+    /// Timestamped in the future.
+    pub future: u64,
+}
+
+enum Phase {
+    Idle,
+    /// Waiting for the servo to probe (since this simulated time).
+    WaitProbe {
+        since_s: f64,
+    },
+    /// Estimator frozen at the probe's start; waiting for the request.
+    FrozenForRequest {
+        since: Instant,
+    },
+    /// The request is out; kill at this instant.
+    KillAt {
+        at: Instant,
+    },
+    /// Frozen; waiting for the stall policy.
+    Frozen {
+        since: Instant,
+        pid: i32,
+    },
+    /// Waiting for the board to be back.
+    Recovering {
+        board: Board,
+        since: Instant,
+        pid: i32,
+    },
+}
+
+/// Injects the planned faults.
+pub struct Injector {
+    plan: Vec<PlannedFault>,
+    next: usize,
+    phase: Phase,
+    t0: Instant,
+    publisher: Publisher<Svc, WrenchSample, ()>,
+    records: Vec<FaultRecord>,
+    bad: BadCounts,
+}
+
+impl Injector {
+    /// An injector for `plan`, publishing bad samples with `publisher`.
+    pub fn new(plan: Vec<PlannedFault>, publisher: Publisher<Svc, WrenchSample, ()>) -> Self {
+        Self {
+            plan,
+            next: 0,
+            phase: Phase::Idle,
+            t0: Instant::now(),
+            publisher,
+            records: Vec::new(),
+            bad: BadCounts::default(),
+        }
+    }
+
+    /// No fault in progress.
+    pub fn idle(&self) -> bool {
+        matches!(self.phase, Phase::Idle)
+    }
+
+    /// Every planned fault injected and over.
+    pub fn done(&self) -> bool {
+        self.idle() && self.next >= self.plan.len()
+    }
+
+    /// The plan.
+    pub fn plan(&self) -> &[PlannedFault] {
+        &self.plan
+    }
+
+    /// The faults injected so far.
+    pub fn records(&self) -> &[FaultRecord] {
+        &self.records
+    }
+
+    /// Bad samples sent.
+    pub fn bad_samples(&self) -> BadCounts {
+        self.bad
+    }
+
+    /// Planned faults on `board` (the restarts they cost are not held against its budget).
+    pub fn planned_for(&self, board: Board) -> u32 {
+        self.plan
+            .iter()
+            .filter(|f| f.kind.target() == Some(board))
+            .count() as u32
+    }
+
+    /// One supervisor iteration: simulated time, the servo's newest mode, the boards
+    /// (servo, sensor, estimator), the newest genuine force sample. Returns what to signal.
+    pub fn step(
+        &mut self,
+        sim_s: f64,
+        servo_mode: u32,
+        boards: &[BoardView; 3],
+        genuine: Option<&WrenchSample>,
+    ) -> Vec<Action> {
+        let now = Instant::now();
+        let view = |b: Board| boards[b as usize];
+        let mut out = Vec::new();
+        let phase = std::mem::replace(&mut self.phase, Phase::Idle);
+        self.phase = match phase {
+            Phase::Idle => {
+                let Some(f) = self.plan.get(self.next).copied() else {
+                    return out;
+                };
+                if sim_s < f.at_s {
+                    return out;
+                }
+                if let Some(b) = f.kind.target() {
+                    let v = view(b);
+                    if v.pid == 0 || v.up_for < MIN_UPTIME || v.data_since.is_none() {
+                        return out;
+                    }
+                }
+                match f.kind {
+                    FaultKind::Kill(b) => self.kill(b, sim_s, servo_mode, boards, &mut out, ""),
+                    FaultKind::Freeze(b) => {
+                        let v = view(b);
+                        self.record(sim_s, servo_mode, v.pid, "");
+                        out.push(Action::Signal(b, libc::SIGSTOP));
+                        Phase::Frozen {
+                            since: now,
+                            pid: v.pid,
+                        }
+                    }
+                    FaultKind::KillMidProbe(_) | FaultKind::KillEstimatorMidRequest => {
+                        Phase::WaitProbe { since_s: sim_s }
+                    }
+                    FaultKind::BadSamples => match genuine {
+                        Some(g) => {
+                            self.record(sim_s, servo_mode, 0, "");
+                            self.burst(g);
+                            self.next += 1;
+                            Phase::Idle
+                        }
+                        None => Phase::Idle,
+                    },
+                }
+            }
+            Phase::WaitProbe { since_s } => {
+                let f = self.plan[self.next];
+                let probing = servo_mode == MODE_PROBING;
+                let late = sim_s - since_s > PROBE_WAIT_S;
+                let note = if probing {
+                    ""
+                } else {
+                    "the servo did not probe in time; injected anyway"
+                };
+                match f.kind {
+                    FaultKind::KillMidProbe(b) if probing || late => {
+                        if view(b).pid == 0 {
+                            Phase::WaitProbe { since_s }
+                        } else {
+                            self.kill(b, sim_s, servo_mode, boards, &mut out, note)
+                        }
+                    }
+                    FaultKind::KillEstimatorMidRequest if probing => {
+                        out.push(Action::Hold(Board::Estimator, true));
+                        out.push(Action::Signal(Board::Estimator, libc::SIGSTOP));
+                        Phase::FrozenForRequest { since: now }
+                    }
+                    FaultKind::KillEstimatorMidRequest if late => {
+                        self.kill(Board::Estimator, sim_s, servo_mode, boards, &mut out, note)
+                    }
+                    _ => Phase::WaitProbe { since_s },
+                }
+            }
+            Phase::FrozenForRequest { since } => {
+                if servo_mode == MODE_AWAITING {
+                    Phase::KillAt {
+                        at: now + REQUEST_KILL_DELAY,
+                    }
+                } else if now.duration_since(since) > REQUEST_WAIT {
+                    out.push(Action::Signal(Board::Estimator, libc::SIGCONT));
+                    out.push(Action::Hold(Board::Estimator, false));
+                    self.record(
+                        sim_s,
+                        servo_mode,
+                        view(Board::Estimator).pid,
+                        "no request came while the estimator was frozen; thawed",
+                    );
+                    self.next += 1;
+                    Phase::Idle
+                } else {
+                    Phase::FrozenForRequest { since }
+                }
+            }
+            // Still held when killed: the supervisor lifts the hold when it reaps the process,
+            // so its stall policy does not count this kill as a stall of its own.
+            Phase::KillAt { at } if now >= at => {
+                self.kill(Board::Estimator, sim_s, servo_mode, boards, &mut out, "")
+            }
+            p @ Phase::KillAt { .. } => p,
+            Phase::Frozen { since, pid } => {
+                let b = self.plan[self.next].kind.target().unwrap_or(Board::Sensor);
+                let v = view(b);
+                if v.pid != pid {
+                    // The stall policy killed it.
+                    if let Some(r) = self.records.last_mut() {
+                        r.detected_ms = Some(now.duration_since(since).as_secs_f64() * 1e3);
+                    }
+                    Phase::Recovering {
+                        board: b,
+                        since,
+                        pid,
+                    }
+                } else if !v.stall_policy && now.duration_since(since) > THAW_AFTER {
+                    out.push(Action::Signal(b, libc::SIGCONT));
+                    if let Some(r) = self.records.last_mut() {
+                        r.note = "no stall policy: thawed with SIGCONT".into();
+                    }
+                    self.next += 1;
+                    Phase::Idle
+                } else {
+                    Phase::Frozen { since, pid }
+                }
+            }
+            Phase::Recovering { board, since, pid } => {
+                let v = view(board);
+                let back = v.pid != 0 && v.pid != pid;
+                match v.data_since {
+                    Some(t) if back && t >= since => {
+                        if let Some(r) = self.records.last_mut() {
+                            r.back_ms = Some(t.duration_since(since).as_secs_f64() * 1e3);
+                        }
+                        self.next += 1;
+                        Phase::Idle
+                    }
+                    _ if now.duration_since(since) > RECOVERY_WAIT => {
+                        if let Some(r) = self.records.last_mut() {
+                            r.note = format!(
+                                "{} not back within {} s",
+                                board.name(),
+                                RECOVERY_WAIT.as_secs()
+                            );
+                        }
+                        self.next += 1;
+                        Phase::Idle
+                    }
+                    _ => Phase::Recovering { board, since, pid },
+                }
+            }
+        };
+        out
+    }
+
+    fn record(&mut self, sim_s: f64, servo_mode: u32, pid: i32, note: &str) {
+        let f = self.plan[self.next];
+        self.records.push(FaultRecord {
+            kind: f.kind.name(),
+            due_s: f.at_s,
+            injected_at_s: sim_s,
+            wall_s: self.t0.elapsed().as_secs_f64(),
+            pid,
+            servo_mode,
+            detected_ms: None,
+            back_ms: None,
+            note: note.into(),
+        });
+    }
+
+    fn kill(
+        &mut self,
+        b: Board,
+        sim_s: f64,
+        servo_mode: u32,
+        boards: &[BoardView; 3],
+        out: &mut Vec<Action>,
+        note: &str,
+    ) -> Phase {
+        let pid = boards[b as usize].pid;
+        self.record(sim_s, servo_mode, pid, note);
+        out.push(Action::Signal(b, libc::SIGKILL));
+        Phase::Recovering {
+            board: b,
+            since: Instant::now(),
+            pid,
+        }
+    }
+
+    /// One of each bad sample, built from the newest genuine one.
+    fn burst(&mut self, g: &WrenchSample) {
+        for kind in BadSample::ALL {
+            let now = rt::monotonic_ns();
+            let mut s = *g;
+            s.flags |= WRENCH_INJECTED;
+            s.publish_ns = now;
+            match kind {
+                BadSample::Nan => s.force_n[0] = f64::NAN,
+                BadSample::Infinite => s.torque_nm = f64::INFINITY,
+                BadSample::Absurd => s.force_n = [1e6, -1e6],
+                BadSample::Repeat => s.publish_ns = g.publish_ns,
+                BadSample::Backwards => {
+                    s.epoch_ns = g.epoch_ns.saturating_sub(1);
+                    s.seq = g.seq + 1000;
+                }
+                BadSample::Future => {
+                    s.seq = g.seq + 1;
+                    s.sample_ns = now + 1_000_000_000;
+                    s.publish_ns = now;
+                }
+            }
+            if self.publisher.send_copy(s).is_ok() {
+                let c = &mut self.bad;
+                *match kind {
+                    BadSample::Nan => &mut c.nan,
+                    BadSample::Infinite => &mut c.infinite,
+                    BadSample::Absurd => &mut c.absurd,
+                    BadSample::Repeat => &mut c.repeat,
+                    BadSample::Backwards => &mut c.backwards,
+                    BadSample::Future => &mut c.future,
+                } += 1;
+            }
+        }
+    }
+}

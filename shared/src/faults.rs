@@ -1,0 +1,506 @@
+//! Fault injection, the pure part: a seeded plan of faults for `afs chaos`, and the figures
+//! that say whether the stack stayed safe through them (from the world and servo samples of
+//! each tick, as the supervisor receives them).
+
+use crate::msg::{PlantSample, SERVO_FORCE_VALID, SERVO_SAFE, ServoSample};
+use rand_chacha::ChaCha8Rng;
+use rand_chacha::rand_core::{Rng, SeedableRng};
+use serde::Serialize;
+
+/// A board of the stack.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Board {
+    /// The plant/servo board.
+    Servo,
+    /// The force-sensor board.
+    Sensor,
+    /// The estimator board.
+    Estimator,
+}
+
+impl Board {
+    /// The process name in the stack file.
+    pub fn name(self) -> &'static str {
+        match self {
+            Board::Servo => "servo",
+            Board::Sensor => "sensor",
+            Board::Estimator => "estimator",
+        }
+    }
+}
+
+/// What to inject.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FaultKind {
+    /// SIGKILL at a random moment.
+    Kill(Board),
+    /// SIGKILL of the servo or sensor while the servo dithers to probe the tangent.
+    KillMidProbe(Board),
+    /// SIGKILL of the estimator while it holds an unanswered tangent request: frozen
+    /// (SIGSTOP) when the probe starts, killed once the request is in its queue.
+    KillEstimatorMidRequest,
+    /// SIGSTOP: alive but silent, until the supervisor's stall policy kills it (or the
+    /// injector sends SIGCONT when the policy is off).
+    Freeze(Board),
+    /// A burst of bad force samples on the wrench stream, one of each [`BadSample`].
+    BadSamples,
+}
+
+impl FaultKind {
+    /// Every kind, by its command-line name.
+    pub const ALL: [(&'static str, FaultKind); 9] = [
+        ("kill-servo", FaultKind::Kill(Board::Servo)),
+        ("kill-sensor", FaultKind::Kill(Board::Sensor)),
+        ("kill-estimator", FaultKind::Kill(Board::Estimator)),
+        (
+            "kill-servo-mid-probe",
+            FaultKind::KillMidProbe(Board::Servo),
+        ),
+        (
+            "kill-sensor-mid-probe",
+            FaultKind::KillMidProbe(Board::Sensor),
+        ),
+        (
+            "kill-estimator-mid-request",
+            FaultKind::KillEstimatorMidRequest,
+        ),
+        ("freeze-sensor", FaultKind::Freeze(Board::Sensor)),
+        ("freeze-estimator", FaultKind::Freeze(Board::Estimator)),
+        ("bad-samples", FaultKind::BadSamples),
+    ];
+
+    /// The kind named `name` (one of [`FaultKind::ALL`]).
+    pub fn from_name(name: &str) -> Result<Self, String> {
+        Self::ALL
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, k)| *k)
+            .ok_or_else(|| {
+                let names: Vec<&str> = Self::ALL.iter().map(|(n, _)| *n).collect();
+                format!("unknown fault '{name}' (one of: {})", names.join(", "))
+            })
+    }
+
+    /// The command-line name.
+    pub fn name(self) -> &'static str {
+        Self::ALL
+            .iter()
+            .find(|(_, k)| *k == self)
+            .map_or("?", |(n, _)| n)
+    }
+
+    /// The board the fault ends (None: the bad-sample burst ends nothing).
+    pub fn target(self) -> Option<Board> {
+        match self {
+            FaultKind::Kill(b) | FaultKind::KillMidProbe(b) | FaultKind::Freeze(b) => Some(b),
+            FaultKind::KillEstimatorMidRequest => Some(Board::Estimator),
+            FaultKind::BadSamples => None,
+        }
+    }
+}
+
+/// The bad force samples of a [`FaultKind::BadSamples`] burst.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum BadSample {
+    /// A NaN force component.
+    Nan,
+    /// An infinite moment.
+    Infinite,
+    /// A force of 10⁶ N, far beyond the sensor's range.
+    Absurd,
+    /// The newest genuine sample again (the servo sees it as repeated, or as going backwards
+    /// if a newer genuine one arrived first).
+    Repeat,
+    /// A sample of an earlier sensor epoch.
+    Backwards,
+    /// A sample timestamped one second in the future.
+    Future,
+}
+
+impl BadSample {
+    /// One of each.
+    pub const ALL: [BadSample; 6] = [
+        BadSample::Nan,
+        BadSample::Infinite,
+        BadSample::Absurd,
+        BadSample::Repeat,
+        BadSample::Backwards,
+        BadSample::Future,
+    ];
+}
+
+/// One planned fault.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct PlannedFault {
+    /// Simulated time at which it becomes due (s).
+    pub at_s: f64,
+    /// What.
+    pub kind: FaultKind,
+}
+
+/// `count` faults drawn from `kinds` (at random, or in turn when `in_turn`), due at simulated
+/// times spread over `[start_s, end_s]`: the interval is cut into `count` equal slots and each
+/// fault falls at a random point of the middle half of its slot, so that two faults are at
+/// least half a slot apart. The same seed gives the same plan.
+pub fn plan(
+    seed: u64,
+    count: usize,
+    start_s: f64,
+    end_s: f64,
+    kinds: &[FaultKind],
+    in_turn: bool,
+) -> Result<Vec<PlannedFault>, String> {
+    if kinds.is_empty() {
+        return Err("no fault kinds to draw from".into());
+    }
+    if !(start_s.is_finite() && end_s.is_finite() && start_s >= 0.0 && end_s > start_s) {
+        return Err(format!(
+            "the faults need a time window: [{start_s}, {end_s}] s is empty"
+        ));
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let slot = (end_s - start_s) / count.max(1) as f64;
+    Ok((0..count)
+        .map(|i| {
+            let u = f64::from(rng.next_u32()) / f64::from(u32::MAX);
+            let draw = rng.next_u32() as usize;
+            let k = if in_turn { i } else { draw } % kinds.len();
+            PlannedFault {
+                at_s: start_s + slot * (i as f64 + 0.25 + 0.5 * u),
+                kind: kinds[k],
+            }
+        })
+        .collect())
+}
+
+/// A servo tick this much later than the one before means the servo itself did not run (the
+/// machine stalled it): the data it then finds too old is its own lateness, not a fault of the
+/// sensor (ns).
+pub const SERVO_STALL_NS: u64 = 500_000;
+
+/// Ticks after a servo restart whose normal force is reported apart (0.5 s at 10 kHz).
+pub const SERVO_RESTART_TICKS: u64 = 5_000;
+
+/// What [`FaultMonitor`] measured.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct FaultFigures {
+    /// Times the servo entered its safe state after having had good force data.
+    pub safe_entries: u64,
+    /// Of those, entries with the servo itself stalled (a tick more than
+    /// [`SERVO_STALL_NS`] after the one before) since its last good data.
+    pub safe_entries_servo_stalled: u64,
+    /// Longest time from the last good force sample (its sampling instant) to the first servo
+    /// tick in the safe state, over the entries where the servo ran on time (ms).
+    pub safe_after_last_good_ms_max: f64,
+    /// Mean of that time over the same entries (ms).
+    pub safe_after_last_good_ms_mean: f64,
+    /// Longest such time over every entry, those with the servo stalled included (ms).
+    pub safe_after_last_good_ms_max_all: f64,
+    /// Largest true normal force after the settling time (N), outside the
+    /// [`SERVO_RESTART_TICKS`] after each servo restart.
+    pub normal_force_max_n: f64,
+    /// That over the preload.
+    pub normal_force_max_over_preload: f64,
+    /// Simulated time of the largest normal force (s).
+    pub normal_force_max_at_s: f64,
+    /// Largest true normal force in the [`SERVO_RESTART_TICKS`] after a servo restart (N): a
+    /// restarted controller resumes the world but not its own state (force-loop integrator,
+    /// a probe in progress), which is a transient of its own.
+    pub normal_force_max_after_servo_restart_n: f64,
+    /// Servo ticks whose measured force (what the controller used) was NaN or infinite.
+    pub controller_non_finite: u64,
+    /// Largest |measured normal or tangential force| the controller used (N).
+    pub controller_force_max_abs_n: f64,
+}
+
+/// Safety figures of a run, tick by tick.
+#[derive(Debug, Clone)]
+pub struct FaultMonitor {
+    preload_n: f64,
+    settle_s: f64,
+    last_good_ns: Option<u64>,
+    was_safe: bool,
+    last_tick_ns: Option<u64>,
+    /// Longest tick-to-tick interval since the last tick with good data (ns).
+    gap_since_good_ns: u64,
+    entries: u64,
+    stalled_entries: u64,
+    latency_sum_ns: u64,
+    latency_max_ns: u64,
+    latency_max_all_ns: u64,
+    normal_max: f64,
+    normal_max_at: f64,
+    restart_max: f64,
+    restart_from: Option<u64>,
+    non_finite: u64,
+    force_max_abs: f64,
+}
+
+impl FaultMonitor {
+    /// A monitor for a preload (N); the normal force counts from `settle_s` of simulated time
+    /// (the first contact's transient is not a fault's).
+    pub fn new(preload_n: f64, settle_s: f64) -> Self {
+        Self {
+            preload_n,
+            settle_s,
+            last_good_ns: None,
+            was_safe: false,
+            last_tick_ns: None,
+            gap_since_good_ns: 0,
+            entries: 0,
+            stalled_entries: 0,
+            latency_sum_ns: 0,
+            latency_max_ns: 0,
+            latency_max_all_ns: 0,
+            normal_max: 0.0,
+            normal_max_at: 0.0,
+            restart_max: 0.0,
+            restart_from: None,
+            non_finite: 0,
+            force_max_abs: 0.0,
+        }
+    }
+
+    /// One tick's samples (the same tick).
+    pub fn push(&mut self, p: &PlantSample, s: &ServoSample) {
+        let safe = s.flags & SERVO_SAFE != 0;
+        if let Some(prev) = self.last_tick_ns {
+            self.gap_since_good_ns = self.gap_since_good_ns.max(s.tick_ns.saturating_sub(prev));
+        }
+        self.last_tick_ns = Some(s.tick_ns);
+        if safe
+            && !self.was_safe
+            && let Some(good) = self.last_good_ns
+        {
+            let latency = s.tick_ns.saturating_sub(good);
+            self.entries += 1;
+            self.latency_max_all_ns = self.latency_max_all_ns.max(latency);
+            if self.gap_since_good_ns > SERVO_STALL_NS {
+                self.stalled_entries += 1;
+            } else {
+                self.latency_sum_ns += latency;
+                self.latency_max_ns = self.latency_max_ns.max(latency);
+            }
+        }
+        self.was_safe = safe;
+        if s.flags & SERVO_FORCE_VALID != 0 {
+            self.last_good_ns = Some(s.wrench_sample_ns);
+            self.gap_since_good_ns = 0;
+        }
+        let measured = [s.normal_force_n, s.tangential_force_n];
+        if measured.iter().any(|v| !v.is_finite()) {
+            self.non_finite += 1;
+        } else {
+            for v in measured {
+                self.force_max_abs = self.force_max_abs.max(v.abs());
+            }
+        }
+        let after_restart = self
+            .restart_from
+            .is_some_and(|r| p.seq >= r && p.seq - r < SERVO_RESTART_TICKS);
+        if after_restart {
+            self.restart_max = self.restart_max.max(p.normal_force_n);
+        } else if p.time_s >= self.settle_s && p.normal_force_n > self.normal_max {
+            self.normal_max = p.normal_force_n;
+            self.normal_max_at = p.time_s;
+        }
+    }
+
+    /// A restarted servo runs the world on from tick `seq`.
+    pub fn servo_restarted_at(&mut self, seq: u64) {
+        self.restart_from = Some(seq);
+    }
+
+    /// The figures so far.
+    pub fn figures(&self) -> FaultFigures {
+        let on_time = self.entries - self.stalled_entries;
+        FaultFigures {
+            safe_entries: self.entries,
+            safe_entries_servo_stalled: self.stalled_entries,
+            safe_after_last_good_ms_max: self.latency_max_ns as f64 * 1e-6,
+            safe_after_last_good_ms_mean: if on_time == 0 {
+                0.0
+            } else {
+                self.latency_sum_ns as f64 * 1e-6 / on_time as f64
+            },
+            safe_after_last_good_ms_max_all: self.latency_max_all_ns as f64 * 1e-6,
+            normal_force_max_n: self.normal_max,
+            normal_force_max_over_preload: self.normal_max / self.preload_n,
+            normal_force_max_at_s: self.normal_max_at,
+            normal_force_max_after_servo_restart_n: self.restart_max,
+            controller_non_finite: self.non_finite,
+            controller_force_max_abs_n: self.force_max_abs,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tick(seq: u64, valid: bool, safe: bool, wrench_ns: u64) -> (PlantSample, ServoSample) {
+        let tick_ns = 1_000_000_000 + seq * 100_000;
+        let p = PlantSample {
+            seq,
+            time_s: seq as f64 * 1e-4,
+            normal_force_n: 2.5,
+            ..Default::default()
+        };
+        let s = ServoSample {
+            seq,
+            tick_ns,
+            flags: if valid { SERVO_FORCE_VALID } else { 0 } | if safe { SERVO_SAFE } else { 0 },
+            wrench_sample_ns: wrench_ns,
+            normal_force_n: 2.5,
+            tangential_force_n: -1.0,
+            ..Default::default()
+        };
+        (p, s)
+    }
+
+    /// A sensor that stops at tick 100: the servo goes safe at tick 116; the latency is the
+    /// first safe tick's time minus the last good sample's, 1.6 ms here.
+    #[test]
+    fn safe_latency_is_measured_from_the_last_good_sample() {
+        let mut m = FaultMonitor::new(2.5, 0.0);
+        let mut last = 0;
+        for seq in 0..300 {
+            let valid = seq < 100 || seq >= 200;
+            let safe = (116..230).contains(&seq);
+            let (p, mut s) = tick(seq, valid, safe, 0);
+            if valid {
+                // Sampled 50 µs before the tick.
+                s.wrench_sample_ns = s.tick_ns - 50_000;
+                last = s.wrench_sample_ns;
+            } else {
+                s.wrench_sample_ns = last;
+            }
+            m.push(&p, &s);
+        }
+        let f = m.figures();
+        assert_eq!(f.safe_entries, 1);
+        // Tick 116 at 1e9 + 11.6 ms; last good sample at 1e9 + 9.9 ms − 0.05 ms.
+        let expected = 11.6 - (9.9 - 0.05);
+        assert!(
+            (f.safe_after_last_good_ms_max - expected).abs() < 1e-9,
+            "{f:?}"
+        );
+        assert!((f.safe_after_last_good_ms_mean - expected).abs() < 1e-9);
+    }
+
+    /// A servo that itself did not run for 2.5 ms finds its data too old: that entry is
+    /// counted apart, and the on-time figures keep the sensor's entry only.
+    #[test]
+    fn entries_after_a_servo_stall_are_counted_apart() {
+        let mut m = FaultMonitor::new(2.5, 0.0);
+        let mut t = 1_000_000_000u64;
+        let mut push = |m: &mut FaultMonitor, t: u64, valid: bool, safe: bool, sample: u64| {
+            let (p, mut s) = tick(0, valid, safe, sample);
+            s.tick_ns = t;
+            m.push(&p, &s);
+        };
+        // On time, good data, then the servo stalls 2.5 ms and wakes up safe.
+        for _ in 0..10 {
+            t += 100_000;
+            push(&mut m, t, true, false, t - 50_000);
+        }
+        let good = t - 50_000;
+        t += 2_500_000;
+        push(&mut m, t, false, true, good);
+        let stall_latency = t - good;
+        // Recovered; then the sensor stops and the on-time servo goes safe 1.55 ms later.
+        for _ in 0..300 {
+            t += 100_000;
+            push(&mut m, t, true, false, t - 50_000);
+        }
+        let good = t - 50_000;
+        for k in 1..=16 {
+            t += 100_000;
+            push(&mut m, t, false, k == 16, good);
+        }
+        let f = m.figures();
+        assert_eq!(f.safe_entries, 2);
+        assert_eq!(f.safe_entries_servo_stalled, 1);
+        assert!((f.safe_after_last_good_ms_max - 1.65).abs() < 1e-9, "{f:?}");
+        assert!((f.safe_after_last_good_ms_max_all - stall_latency as f64 * 1e-6).abs() < 1e-9);
+    }
+
+    /// The start-up (no good data yet) is not a safe-state entry to measure.
+    #[test]
+    fn entries_without_good_data_are_not_measured() {
+        let mut m = FaultMonitor::new(2.5, 0.0);
+        let (p, s) = tick(0, false, true, 0);
+        m.push(&p, &s);
+        assert_eq!(m.figures().safe_entries, 0);
+        let (p, s) = tick(1, true, false, 1_000_000_000);
+        m.push(&p, &s);
+        let (p, s) = tick(2, false, true, 0);
+        m.push(&p, &s);
+        assert_eq!(m.figures().safe_entries, 1);
+    }
+
+    #[test]
+    fn normal_force_and_controller_values_are_bounded() {
+        let mut m = FaultMonitor::new(2.0, 0.5);
+        for seq in 0..10_000u64 {
+            let (mut p, mut s) = tick(seq, true, false, 0);
+            // A 9 N spike during the settling time is ignored, a 3.5 N one later is not.
+            p.normal_force_n = match seq {
+                100 => 9.0,
+                7_000 => 3.5,
+                _ => 2.0,
+            };
+            if seq == 8_000 {
+                s.normal_force_n = f64::NAN;
+            }
+            // A restart at tick 9 000 and a 7 N transient 0.1 s later: reported apart.
+            if seq == 9_000 {
+                m.servo_restarted_at(9_000);
+            }
+            if seq == 9_999 {
+                p.normal_force_n = 7.0;
+            }
+            m.push(&p, &s);
+        }
+        let f = m.figures();
+        assert_eq!(f.normal_force_max_n, 3.5);
+        assert_eq!(f.normal_force_max_over_preload, 1.75);
+        assert!((f.normal_force_max_at_s - 0.7).abs() < 1e-12);
+        assert_eq!(f.controller_non_finite, 1);
+        assert_eq!(f.normal_force_max_after_servo_restart_n, 7.0);
+        assert_eq!(f.controller_force_max_abs_n, 2.5);
+    }
+
+    #[test]
+    fn plans_are_seeded_spread_and_checked() {
+        let kinds: Vec<FaultKind> = FaultKind::ALL.iter().map(|(_, k)| *k).collect();
+        let a = plan(7, 50, 2.0, 102.0, &kinds, false).unwrap();
+        let b = plan(7, 50, 2.0, 102.0, &kinds, false).unwrap();
+        assert_eq!(a, b);
+        assert_ne!(a, plan(8, 50, 2.0, 102.0, &kinds, false).unwrap());
+        assert_eq!(a.len(), 50);
+        // Slots of 2 s: each fault in the middle half of its own.
+        for (i, f) in a.iter().enumerate() {
+            let lo = 2.0 + 2.0 * i as f64;
+            assert!(f.at_s >= lo + 0.5 && f.at_s <= lo + 1.5, "{i}: {}", f.at_s);
+        }
+        // Every kind drawn at least once in 50 draws of 9.
+        for (name, k) in FaultKind::ALL {
+            assert!(a.iter().any(|f| f.kind == k), "{name} never drawn");
+            assert_eq!(FaultKind::from_name(name), Ok(k));
+            assert_eq!(k.name(), name);
+        }
+        assert!(FaultKind::from_name("kill-everything").is_err());
+        // In turn: the kinds cycle.
+        let two = [kinds[0], kinds[8]];
+        let t = plan(7, 5, 0.0, 10.0, &two, true).unwrap();
+        let got: Vec<FaultKind> = t.iter().map(|f| f.kind).collect();
+        assert_eq!(got, [two[0], two[1], two[0], two[1], two[0]]);
+        assert!(plan(1, 3, 5.0, 5.0, &kinds, false).is_err());
+        assert!(plan(1, 3, 0.0, 5.0, &[], false).is_err());
+        assert!(plan(1, 3, f64::NAN, 5.0, &kinds, false).is_err());
+    }
+}

@@ -1,0 +1,325 @@
+//! Fault injection on the real binaries (`afs chaos`, and signals sent by the test itself):
+//! killed and frozen boards, bad force samples, a killed supervisor, a 50-kill soak. Each test
+//! has its own prefix and leaves none of its shared memory behind; none asserts a run time.
+
+use serde_json::Value;
+use std::process::{Output, Stdio};
+use std::time::{Duration, Instant};
+
+mod common;
+use common::*;
+
+/// `afs chaos ... --json` on its own prefix; returns the report (and asserts it is one).
+fn chaos(p: &str, args: &[&str]) -> (Output, Value) {
+    let out = afs()
+        .args(["chaos", "--json", "--quiet", "--prefix", p])
+        .args(args)
+        .output()
+        .unwrap();
+    let r = json_of(&out);
+    (out, r)
+}
+
+fn assert_passed(out: &Output, r: &Value) {
+    let failed: Vec<&Value> = r["checks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|c| c["pass"] != true)
+        .collect();
+    assert!(
+        out.status.success() && r["passed"] == true,
+        "failed checks: {failed:?}\nstderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+fn process<'a>(r: &'a Value, name: &str) -> &'a Value {
+    r["processes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["name"] == name)
+        .unwrap()
+}
+
+fn faults_of<'a>(r: &'a Value, kind: &str) -> Vec<&'a Value> {
+    r["chaos"]["faults"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|f| f["kind"] == kind)
+        .collect()
+}
+
+fn f(v: &Value) -> f64 {
+    v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
+}
+
+/// The sensor killed at a random moment, killed while the servo dithers to probe, and frozen:
+/// each time the servo is safe within 2 ms of the last good sample (when it itself ran on
+/// time), the normal force stays under 2× the preload, a killed sensor's data is back within
+/// 500 ms, the frozen one is found by the stall policy and replaced, and the scenario passes.
+#[test]
+fn sensor_killed_or_frozen_the_servo_stays_safe_and_recovers() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let p = prefix("sens");
+    let (out, r) = chaos(
+        &p,
+        &[
+            "--scenario",
+            "surface-tracking",
+            "--duration",
+            "16",
+            "--kills",
+            "3",
+            "--faults",
+            "kill-sensor,kill-sensor-mid-probe,freeze-sensor",
+            "--in-turn",
+        ],
+    );
+    assert_passed(&out, &r);
+    assert_eq!(r["chaos"]["injected"], 3);
+    let fl = &r["faults"];
+    // Every fault sends the servo to its safe state; entries where the machine stalled the
+    // servo itself are counted apart (docs/reliability.md).
+    let on_time =
+        fl["safe_entries"].as_u64().unwrap() - fl["safe_entries_servo_stalled"].as_u64().unwrap();
+    assert!(on_time >= 1, "{fl}");
+    assert!(f(&fl["safe_after_last_good_ms_max"]) <= 2.0, "{fl}");
+    assert!(f(&fl["normal_force_max_over_preload"]) <= 2.0, "{fl}");
+    for kind in ["kill-sensor", "kill-sensor-mid-probe"] {
+        let k = faults_of(&r, kind);
+        assert_eq!(k.len(), 1, "{kind}");
+        assert!(f(&k[0]["back_ms"]) <= 500.0, "{kind}: {}", k[0]);
+    }
+    let mid = faults_of(&r, "kill-sensor-mid-probe")[0];
+    assert_eq!(mid["servo_mode"], 2, "not killed while probing: {mid}");
+    let frozen = faults_of(&r, "freeze-sensor")[0];
+    assert!(frozen["detected_ms"].as_f64().is_some(), "{frozen}");
+    assert!(frozen["back_ms"].as_f64().is_some(), "{frozen}");
+    let sensor = process(&r, "sensor");
+    assert_eq!(sensor["restarts"], 3);
+    assert_eq!(sensor["stalls_killed"], 1);
+    assert_eq!(r["stack"]["tracking"]["ticks_without_contact"], 0);
+    assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
+}
+
+/// The estimator frozen while the servo probes and killed once the servo's request is in its
+/// queue: the servo times out, re-sends to the restarted estimator, and gets a right tangent.
+/// Then the estimator frozen for good: the stall policy kills and replaces it.
+#[test]
+fn estimator_killed_mid_request_answers_after_the_restart() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let p = prefix("est");
+    let (out, r) = chaos(
+        &p,
+        &[
+            "--scenario",
+            "surface-tracking",
+            "--duration",
+            "24",
+            "--kills",
+            "2",
+            "--faults",
+            "kill-estimator-mid-request,freeze-estimator",
+            "--in-turn",
+        ],
+    );
+    assert_passed(&out, &r);
+    let mid = faults_of(&r, "kill-estimator-mid-request")[0];
+    assert_eq!(mid["servo_mode"], 3, "not killed mid-request: {mid}");
+    assert_eq!(mid["note"], "", "{mid}");
+    let est = &r["loop"]["estimator"];
+    assert!(est["retries"].as_u64().unwrap() >= 1, "{est}");
+    assert!(est["answers"].as_u64().unwrap() >= 1, "{est}");
+    let e = &r["stack"]["tracking"]["estimations"];
+    assert!(e["estimates"].as_u64().unwrap() >= 1, "{e}");
+    assert_eq!(e["failures"], 0, "{e}");
+    let t = &r["stack"]["tracking"];
+    assert!(f(&t["tangent_error_rms_deg"]) < 1.0, "{t}");
+    let frozen = faults_of(&r, "freeze-estimator")[0];
+    assert!(frozen["detected_ms"].as_f64().is_some(), "{frozen}");
+    let estimator = process(&r, "estimator");
+    assert_eq!(estimator["restarts"], 2);
+    assert_eq!(estimator["stalls_killed"], 1);
+    assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
+}
+
+/// Bursts of NaN, infinite, absurd, repeated, backwards and future force samples: the gate
+/// counts every one by kind, none reaches the controller as a value, and the run still agrees
+/// with the lockstep reference (they change nothing).
+#[test]
+fn bad_samples_are_counted_and_never_reach_the_controller() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let p = prefix("bad");
+    let (out, r) = chaos(
+        &p,
+        &[
+            "--scenario",
+            "surface-tracking",
+            "--duration",
+            "8",
+            "--kills",
+            "5",
+            "--faults",
+            "bad-samples",
+        ],
+    );
+    assert_passed(&out, &r);
+    let sent = &r["chaos"]["bad_samples"]["sent"];
+    for k in ["nan", "infinite", "absurd", "repeat", "backwards", "future"] {
+        assert_eq!(sent[k], 5, "{k}: {sent}");
+    }
+    let b = &r["loop"]["bad_samples"];
+    let n = |k: &str| b[k].as_u64().unwrap();
+    assert_eq!(n("non_finite"), 10, "{b}");
+    assert_eq!(n("out_of_range"), 5, "{b}");
+    assert_eq!(n("future"), 5, "{b}");
+    assert_eq!(n("seq_repeat") + n("seq_backwards"), 10, "{b}");
+    assert!(n("seq_backwards") >= 5, "{b}");
+    assert_eq!(r["faults"]["controller_non_finite"], 0);
+    assert!(f(&r["faults"]["controller_force_max_abs_n"]) < 130.0);
+    assert_eq!(r["agreement"]["agrees"], true, "{}", r["agreement"]);
+    assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
+}
+
+/// The supervisor SIGKILLed: its boards follow it (no child keeps running unsupervised), and
+/// the next `afs run` on the prefix removes the dead stack's shared memory and runs.
+#[test]
+fn a_killed_supervisor_takes_its_boards_and_the_next_run_cleans_up() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let p = prefix("sup");
+    let run = afs()
+        .args([
+            "run",
+            "--duration",
+            "60",
+            "--json",
+            "--quiet",
+            "--prefix",
+            &p,
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut run = KillOnDrop(Some(run));
+    let _clean = CleanPrefix(p.clone());
+    wait_running(&p, Duration::from_secs(60));
+    let boards: Vec<i32> = ["servo", "sensor", "estimator"]
+        .iter()
+        .map(|b| board_pid(&p, b))
+        .collect();
+    // SAFETY: signalling our own child.
+    unsafe {
+        libc::kill(run.id() as i32, libc::SIGKILL);
+    }
+    let _ = run.0.as_mut().unwrap().wait();
+    let alive = |pid: i32| {
+        std::fs::read_to_string(format!("/proc/{pid}/stat"))
+            .is_ok_and(|s| s.split_whitespace().nth(2).is_none_or(|st| st != "Z"))
+    };
+    let t0 = Instant::now();
+    while boards.iter().any(|&b| alive(b)) {
+        assert!(
+            t0.elapsed() < Duration::from_secs(20),
+            "boards still running without their supervisor: {:?}",
+            boards.iter().filter(|&&b| alive(b)).collect::<Vec<_>>()
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // What the dead supervisor left (the boards' nodes may already have removed some of it on
+    // their way out) is removed by the next run on the prefix, which then runs.
+    let out = afs()
+        .args([
+            "run",
+            "--duration",
+            "3",
+            "--json",
+            "--quiet",
+            "--prefix",
+            &p,
+        ])
+        .output()
+        .unwrap();
+    let r = json_of(&out);
+    assert_passed(&out, &r);
+    assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
+}
+
+/// 50 random SIGKILLs of servo, sensor and estimator over 2 simulated minutes: every fault
+/// recovered, the world resumed each time (every tick once, none lost or reordered, at most
+/// one servo sample lost per servo kill), no file of a dead process left in /dev/shm, the
+/// supervisor's heap and the boards' memory flat, and nothing left at the end.
+#[test]
+fn soak_fifty_random_kills() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let p = prefix("soak");
+    let (out, r) = chaos(
+        &p,
+        &[
+            "--scenario",
+            "surface-tracking",
+            "--duration",
+            "120",
+            "--kills",
+            "50",
+            "--seed",
+            "11",
+            "--faults",
+            "kill-servo,kill-sensor,kill-estimator",
+        ],
+    );
+    assert_passed(&out, &r);
+    let c = &r["chaos"];
+    assert_eq!(c["injected"], 50);
+    let s = &r["samples"];
+    assert_eq!(s["plant_received"], 1_200_001, "{s}");
+    assert_eq!(s["plant_lost"], 0, "{s}");
+    assert_eq!(s["reordered"], 0, "{s}");
+    let servo_kills = faults_of(&r, "kill-servo").len() as u64;
+    assert!(servo_kills > 0);
+    assert_eq!(process(&r, "servo")["restarts"].as_u64(), Some(servo_kills));
+    assert!(s["servo_lost"].as_u64().unwrap() <= servo_kills, "{s}");
+    let (before, after) = (
+        &c["steady_before_first_fault"],
+        &c["steady_after_last_fault"],
+    );
+    assert!(before.is_object() && after.is_object(), "{c}");
+    assert_eq!(after["stale_files"].as_array().map(Vec::len), Some(0));
+    assert_eq!(before["shm_files"], after["shm_files"]);
+    let grew = |k: &str, who: &str| f(&after[who][k]) - f(&before[who][k]);
+    assert!(grew("anon", "supervisor_rss_kib") < 8192.0, "{c}");
+    assert!(grew("anon", "boards_rss_kib").abs() < 8192.0, "{c}");
+    assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
+}
+
+/// Bad `afs chaos` input: a clear message and exit status 2, never a panic or a hang.
+#[test]
+fn bad_chaos_input_is_refused_clearly() {
+    let cases: [(&[&str], &str); 5] = [
+        (&["chaos", "--faults", "kill-everything"], "unknown fault"),
+        (&["chaos", "--kills", "100000"], "too many"),
+        (
+            &["chaos", "--duration", "2"],
+            "at least 3 simulated seconds",
+        ),
+        (&["chaos", "--duration=-1"], "must be"),
+        (&["chaos", "--kills", "-3"], "unexpected argument '-3'"),
+    ];
+    for (args, needle) in cases {
+        let out = afs()
+            .args(args)
+            .args(["--prefix", &prefix("badc")])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(
+            err.contains(needle),
+            "{args:?}: expected '{needle}' in: {err}"
+        );
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+    }
+}
