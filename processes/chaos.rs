@@ -52,7 +52,8 @@ pub struct BoardView {
 pub enum Action {
     /// Send a signal to the board's process.
     Signal(Board, i32),
-    /// Exempt the board from the stall policy (the injector holds it frozen on purpose) or not.
+    /// Exempt the board from the stall policy (the injector holds it frozen on purpose) or not;
+    /// the supervisor lifts the hold when the process ends.
     Hold(Board, bool),
 }
 

@@ -1393,6 +1393,9 @@ fn supervise(
                         );
                         p.stalls += 1;
                         p.signal(libc::SIGKILL);
+                        // Until it is reaped (a stopped process takes a moment to die), it is
+                        // not a stall again.
+                        p.held = true;
                     }
                 }
             } else if p.state == ProcState::Waiting && p.restart_at.is_some_and(|t| now >= t) {

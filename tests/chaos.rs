@@ -118,7 +118,7 @@ fn estimator_killed_mid_request_answers_after_the_restart() {
             "--scenario",
             "surface-tracking",
             "--duration",
-            "24",
+            "32",
             "--kills",
             "2",
             "--faults",
@@ -136,8 +136,13 @@ fn estimator_killed_mid_request_answers_after_the_restart() {
     let e = &r["stack"]["tracking"]["estimations"];
     assert!(e["estimates"].as_u64().unwrap() >= 1, "{e}");
     assert_eq!(e["failures"], 0, "{e}");
-    let t = &r["stack"]["tracking"];
-    assert!(f(&t["tangent_error_rms_deg"]) < 1.0, "{t}");
+    // The tangent after the retried estimate is as right as without the fault: the run's
+    // tangent error is within 0.5° RMS of the fault-free lockstep reference's.
+    let (t, reference) = (&r["stack"]["tracking"], &r["reference"]["tracking"]);
+    assert!(
+        f(&t["tangent_error_rms_deg"]) <= f(&reference["tangent_error_rms_deg"]) + 0.5,
+        "{t}\nreference: {reference}"
+    );
     let frozen = faults_of(&r, "freeze-estimator")[0];
     assert!(frozen["detected_ms"].as_f64().is_some(), "{frozen}");
     let estimator = process(&r, "estimator");

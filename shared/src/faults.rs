@@ -368,7 +368,7 @@ mod tests {
         let mut m = FaultMonitor::new(2.5, 0.0);
         let mut last = 0;
         for seq in 0..300 {
-            let valid = seq < 100 || seq >= 200;
+            let valid = !(100..200).contains(&seq);
             let safe = (116..230).contains(&seq);
             let (p, mut s) = tick(seq, valid, safe, 0);
             if valid {
@@ -397,7 +397,7 @@ mod tests {
     fn entries_after_a_servo_stall_are_counted_apart() {
         let mut m = FaultMonitor::new(2.5, 0.0);
         let mut t = 1_000_000_000u64;
-        let mut push = |m: &mut FaultMonitor, t: u64, valid: bool, safe: bool, sample: u64| {
+        let push = |m: &mut FaultMonitor, t: u64, valid: bool, safe: bool, sample: u64| {
             let (p, mut s) = tick(0, valid, safe, sample);
             s.tick_ns = t;
             m.push(&p, &s);
