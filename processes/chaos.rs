@@ -76,6 +76,8 @@ pub struct FaultRecord {
     pub detected_ms: Option<f64>,
     /// Time from the fault to the board's data flowing again (ms).
     pub back_ms: Option<f64>,
+    /// Frozen and let go again (SIGCONT), not killed: nothing to come back.
+    pub thawed: bool,
     /// Anything unusual.
     pub note: String,
 }
@@ -113,6 +115,7 @@ enum Phase {
     },
     /// Frozen; waiting for the stall policy.
     Frozen {
+        board: Board,
         since: Instant,
         pid: i32,
     },
@@ -216,6 +219,7 @@ impl Injector {
                         self.record(sim_s, servo_mode, v.pid, "");
                         out.push(Action::Signal(b, libc::SIGSTOP));
                         Phase::Frozen {
+                            board: b,
                             since: now,
                             pid: v.pid,
                         }
@@ -276,6 +280,9 @@ impl Injector {
                         view(Board::Estimator).pid,
                         "no request came while the estimator was frozen; thawed",
                     );
+                    if let Some(r) = self.records.last_mut() {
+                        r.thawed = true;
+                    }
                     self.next += 1;
                     Phase::Idle
                 } else {
@@ -288,8 +295,11 @@ impl Injector {
                 self.kill(Board::Estimator, sim_s, servo_mode, boards, &mut out, "")
             }
             p @ Phase::KillAt { .. } => p,
-            Phase::Frozen { since, pid } => {
-                let b = self.plan[self.next].kind.target().unwrap_or(Board::Sensor);
+            Phase::Frozen {
+                board: b,
+                since,
+                pid,
+            } => {
                 let v = view(b);
                 if v.pid != pid {
                     // The stall policy killed it.
@@ -305,11 +315,16 @@ impl Injector {
                     out.push(Action::Signal(b, libc::SIGCONT));
                     if let Some(r) = self.records.last_mut() {
                         r.note = "no stall policy: thawed with SIGCONT".into();
+                        r.thawed = true;
                     }
                     self.next += 1;
                     Phase::Idle
                 } else {
-                    Phase::Frozen { since, pid }
+                    Phase::Frozen {
+                        board: b,
+                        since,
+                        pid,
+                    }
                 }
             }
             Phase::Recovering { board, since, pid } => {
@@ -352,6 +367,7 @@ impl Injector {
             servo_mode,
             detected_ms: None,
             back_ms: None,
+            thawed: false,
             note: note.into(),
         });
     }

@@ -1018,7 +1018,7 @@ fn chaos_checks(
     let not_back = c
         .records
         .iter()
-        .filter(|r| r.pid != 0 && r.back_ms.is_none() && !r.note.contains("thawed"))
+        .filter(|r| r.pid != 0 && r.back_ms.is_none() && !r.thawed)
         .count();
     check(
         "faulted boards that did not come back",
@@ -1040,17 +1040,18 @@ fn chaos_checks(
         "<=",
         2.0,
     );
-    let sensor_back: Vec<f64> = c
-        .records
-        .iter()
-        .filter(|r| r.kind.starts_with("kill-sensor"))
-        .filter_map(|r| r.back_ms)
-        .collect();
-    let worst_sensor_back = sensor_back.iter().copied().fold(0.0, f64::max);
-    if !sensor_back.is_empty() {
+    // Recovery times (ms) of the faults whose kind starts with `prefix`.
+    let back = |prefix: &str| -> Vec<f64> {
+        c.records
+            .iter()
+            .filter(|r| r.kind.starts_with(prefix))
+            .filter_map(|r| r.back_ms)
+            .collect()
+    };
+    if let Some(worst) = max_of(&back("kill-sensor")) {
         check(
             "worst time for a killed sensor's data to be back (ms)",
-            worst_sensor_back,
+            worst,
             "<=",
             500.0,
         );
@@ -1095,16 +1096,11 @@ fn chaos_checks(
             RSS_GROWTH_LIMIT_KIB,
         );
     }
-    let back = |prefix: &str| -> Value {
-        let v: Vec<f64> = c
-            .records
-            .iter()
-            .filter(|r| r.kind.starts_with(prefix))
-            .filter_map(|r| r.back_ms)
-            .collect();
+    let summary = |prefix: &str| -> Value {
+        let v = back(prefix);
         json!({
             "count": v.len(),
-            "max_ms": v.iter().copied().fold(None, |m: Option<f64>, x| Some(m.map_or(x, |m| m.max(x)))),
+            "max_ms": max_of(&v),
             "mean_ms": (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64),
         })
     };
@@ -1114,17 +1110,22 @@ fn chaos_checks(
         "injected": c.records.len(),
         "faults": c.records,
         "back_after_kill": {
-            "servo": back("kill-servo"),
-            "sensor": back("kill-sensor"),
-            "estimator": back("kill-estimator"),
-            "frozen_sensor": back("freeze-sensor"),
-            "frozen_estimator": back("freeze-estimator"),
+            "servo": summary("kill-servo"),
+            "sensor": summary("kill-sensor"),
+            "estimator": summary("kill-estimator"),
+            "frozen_sensor": summary("freeze-sensor"),
+            "frozen_estimator": summary("freeze-estimator"),
         },
-        "freeze_detected_ms_max": detected.iter().copied().fold(None, |m: Option<f64>, x| Some(m.map_or(x, |m| m.max(x)))),
+        "freeze_detected_ms_max": max_of(&detected),
         "bad_samples": { "sent": c.bad_sent, "counted_by_last_servo": counted },
         "steady_before_first_fault": steady[0],
         "steady_after_last_fault": steady[1],
     })
+}
+
+/// The largest of `v` (None when empty).
+fn max_of(v: &[f64]) -> Option<f64> {
+    v.iter().copied().reduce(f64::max)
 }
 
 /// Heap the supervisor may gain over a chaos run (KiB): its scenario monitor keeps a track

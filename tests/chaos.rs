@@ -3,7 +3,7 @@
 //! has its own prefix and leaves none of its shared memory behind; none asserts a run time.
 
 use serde_json::Value;
-use std::process::{Output, Stdio};
+use std::process::Output;
 use std::time::{Duration, Instant};
 
 mod common;
@@ -195,21 +195,7 @@ fn bad_samples_are_counted_and_never_reach_the_controller() {
 fn a_killed_supervisor_takes_its_boards_and_the_next_run_cleans_up() {
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let p = prefix("sup");
-    let run = afs()
-        .args([
-            "run",
-            "--duration",
-            "60",
-            "--json",
-            "--quiet",
-            "--prefix",
-            &p,
-        ])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut run = KillOnDrop(Some(run));
+    let mut run = start_run(&p, &["--duration", "60"]);
     let _clean = CleanPrefix(p.clone());
     wait_running(&p, Duration::from_secs(60));
     let boards: Vec<i32> = ["servo", "sensor", "estimator"]

@@ -7,7 +7,7 @@
 
 use serde_json::Value;
 use std::path::Path;
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 mod common;
@@ -68,20 +68,15 @@ fn a_running_stack_serves_clients_and_keeps_its_prefix() {
     let dir = std::env::temp_dir().join(format!("afs-test-{p}"));
     std::fs::create_dir_all(&dir).unwrap();
     let rec = dir.join("run.mcap");
-    let run = afs()
-        .args([
-            "run",
+    let run = start_run(
+        &p,
+        &[
             "--scenario",
             "friction-suppression",
-            "--json",
-            "--quiet",
-        ])
-        .args(["--prefix", &p, "--record"])
-        .arg(&rec)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+            "--record",
+            rec.to_str().unwrap(),
+        ],
+    );
     let status = wait_running(&p, Duration::from_secs(20));
     let names: Vec<&str> = status["processes"]
         .as_array()
@@ -152,7 +147,7 @@ fn a_running_stack_serves_clients_and_keeps_its_prefix() {
     // Two stacks, a Python client and `afs status` at once are more than this 2-core machine
     // holds at 10 kHz: the servo may see stale force data and go safe for a while, which moves
     // the figures away from the lockstep's; the run itself must complete and clean up.
-    let out = finish(run, "afs run");
+    let out = finish(run.take(), "afs run");
     let r = json_of(&out);
     assert_eq!(
         r["finished"],
@@ -213,26 +208,13 @@ fn a_running_stack_serves_clients_and_keeps_its_prefix() {
 fn ctrl_c_stops_the_stack_and_cleans_up() {
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let p = prefix("cc");
-    let run = afs()
-        .args([
-            "run",
-            "--duration",
-            "60",
-            "--json",
-            "--quiet",
-            "--prefix",
-            &p,
-        ])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let run = start_run(&p, &["--duration", "60"]);
     wait_running(&p, Duration::from_secs(20));
     // SAFETY: signalling our own child.
     unsafe {
         libc::kill(run.id() as i32, libc::SIGINT);
     }
-    let out = finish(run, "afs run");
+    let out = finish(run.take(), "afs run");
     let r = json_of(&out);
     assert_eq!(r["interrupted"], true);
     assert_eq!(
@@ -503,14 +485,7 @@ fn the_estimator_board_answers_requests() {
 fn killed_boards_are_restarted_and_the_world_resumes() {
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let p = prefix("kill");
-    let run = afs()
-        .args(["run", "--scenario", "surface-tracking", "--duration", "12"])
-        .args(["--json", "--quiet", "--prefix", &p])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let run = KillOnDrop(Some(run));
+    let run = start_run(&p, &["--scenario", "surface-tracking", "--duration", "12"]);
     wait_running(&p, Duration::from_secs(60));
     for board in ["sensor", "servo"] {
         let pid = board_pid(&p, board);

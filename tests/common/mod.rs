@@ -4,7 +4,7 @@
 
 use serde_json::Value;
 use std::path::PathBuf;
-use std::process::{Child, Command, Output};
+use std::process::{Child, Command, Output, Stdio};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
@@ -34,27 +34,46 @@ pub fn json_of(out: &Output) -> Value {
     })
 }
 
-/// Waits (with a watchdog) until `afs status` sees the stack's servo loop running.
-pub fn wait_running(prefix: &str, limit: Duration) -> Value {
+/// `afs run --json --quiet --prefix <prefix> <args>` started in the background, its output
+/// piped, killed if the test fails before it ends.
+pub fn start_run(prefix: &str, args: &[&str]) -> KillOnDrop {
+    let child = afs()
+        .args(["run", "--json", "--quiet", "--prefix", prefix])
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    KillOnDrop(Some(child))
+}
+
+/// Polls `afs status --json` (with a watchdog of `limit`) until `pick` finds what it wants.
+fn poll_status<T>(prefix: &str, limit: Duration, pick: impl Fn(&Value) -> Option<T>) -> T {
     let t0 = Instant::now();
     loop {
         let out = afs()
             .args(["status", "--json", "--prefix", prefix])
             .output()
             .unwrap();
-        if out.status.success() {
-            let v = json_of(&out);
-            if v["loop"]["ticks"].as_u64().unwrap_or(0) > 1000 {
-                return v;
-            }
+        if out.status.success()
+            && let Some(x) = pick(&json_of(&out))
+        {
+            return x;
         }
         assert!(
             t0.elapsed() < limit,
-            "the stack '{prefix}' did not come up: {}",
+            "stack '{prefix}': not there within {limit:?}: {}",
             String::from_utf8_lossy(&out.stderr)
         );
-        std::thread::sleep(Duration::from_millis(200));
+        std::thread::sleep(Duration::from_millis(100));
     }
+}
+
+/// Waits (with a watchdog) until `afs status` sees the stack's servo loop running.
+pub fn wait_running(prefix: &str, limit: Duration) -> Value {
+    poll_status(prefix, limit, |v| {
+        (v["loop"]["ticks"].as_u64().unwrap_or(0) > 1000).then(|| v.clone())
+    })
 }
 
 pub fn finish(child: Child, what: &str) -> Output {
@@ -104,26 +123,9 @@ impl Drop for CleanPrefix {
 
 /// The pid of the board `name` of a running stack, from `afs status`.
 pub fn board_pid(prefix: &str, name: &str) -> i32 {
-    let t0 = Instant::now();
-    loop {
-        let out = afs()
-            .args(["status", "--json", "--prefix", prefix])
-            .output()
-            .unwrap();
-        if out.status.success() {
-            let v = json_of(&out);
-            if let Some(p) = v["nodes"]
-                .as_array()
-                .and_then(|a| a.iter().find(|n| n["name"] == name))
-                .and_then(|n| n["pid"].as_i64())
-            {
-                return p as i32;
-            }
-        }
-        assert!(
-            t0.elapsed() < Duration::from_secs(30),
-            "no {name} in '{prefix}'"
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    poll_status(prefix, Duration::from_secs(30), |v| {
+        v["nodes"].as_array()?.iter().find(|n| n["name"] == name)?["pid"]
+            .as_i64()
+            .map(|p| p as i32)
+    })
 }
