@@ -101,17 +101,21 @@ pub struct BadCounts {
 
 enum Phase {
     Idle,
-    /// Waiting for the servo to probe (since this simulated time).
+    /// Waiting for the servo to probe (since this simulated time); `abandoned` probes were
+    /// cut short before their request went out.
     WaitProbe {
         since_s: f64,
+        abandoned: u32,
     },
     /// Estimator frozen at the probe's start; waiting for the request.
     FrozenForRequest {
         since: Instant,
+        abandoned: u32,
     },
     /// The request is out; kill at this instant.
     KillAt {
         at: Instant,
+        abandoned: u32,
     },
     /// Frozen; waiting for the stall policy.
     Frozen {
@@ -125,6 +129,19 @@ enum Phase {
         since: Instant,
         pid: i32,
     },
+}
+
+/// The note of a mid-request kill after `abandoned` probes were cut short, followed by `note`.
+fn abandoned_note(abandoned: u32, note: &str) -> String {
+    if abandoned == 0 {
+        return note.into();
+    }
+    let first = format!("the servo cut {abandoned} probe(s) short first; waited for the next");
+    if note.is_empty() {
+        first
+    } else {
+        format!("{first}; {note}")
+    }
 }
 
 /// Injects the planned faults.
@@ -225,7 +242,10 @@ impl Injector {
                         }
                     }
                     FaultKind::KillMidProbe(_) | FaultKind::KillEstimatorMidRequest => {
-                        Phase::WaitProbe { since_s: sim_s }
+                        Phase::WaitProbe {
+                            since_s: sim_s,
+                            abandoned: 0,
+                        }
                     }
                     FaultKind::BadSamples => match genuine {
                         Some(g) => {
@@ -238,38 +258,54 @@ impl Injector {
                     },
                 }
             }
-            Phase::WaitProbe { since_s } => {
+            Phase::WaitProbe { since_s, abandoned } => {
                 let f = self.plan[self.next];
                 let probing = servo_mode == MODE_PROBING;
                 let late = sim_s - since_s > PROBE_WAIT_S;
                 let note = if probing {
-                    ""
+                    String::new()
                 } else {
-                    "the servo did not probe in time; injected anyway"
+                    "the servo did not probe in time; injected anyway".into()
                 };
+                let waiting = Phase::WaitProbe { since_s, abandoned };
                 match f.kind {
                     FaultKind::KillMidProbe(b) if probing || late => {
                         if view(b).pid == 0 {
-                            Phase::WaitProbe { since_s }
+                            waiting
                         } else {
-                            self.kill(b, sim_s, servo_mode, boards, &mut out, note)
+                            self.kill(b, sim_s, servo_mode, boards, &mut out, &note)
                         }
                     }
                     FaultKind::KillEstimatorMidRequest if probing => {
                         out.push(Action::Hold(Board::Estimator, true));
                         out.push(Action::Signal(Board::Estimator, libc::SIGSTOP));
-                        Phase::FrozenForRequest { since: now }
+                        Phase::FrozenForRequest {
+                            since: now,
+                            abandoned,
+                        }
                     }
                     FaultKind::KillEstimatorMidRequest if late => {
-                        self.kill(Board::Estimator, sim_s, servo_mode, boards, &mut out, note)
+                        let note = abandoned_note(abandoned, &note);
+                        self.kill(Board::Estimator, sim_s, servo_mode, boards, &mut out, &note)
                     }
-                    _ => Phase::WaitProbe { since_s },
+                    _ => waiting,
                 }
             }
-            Phase::FrozenForRequest { since } => {
+            Phase::FrozenForRequest { since, abandoned } => {
                 if servo_mode == MODE_AWAITING {
                     Phase::KillAt {
                         at: now + REQUEST_KILL_DELAY,
+                        abandoned,
+                    }
+                } else if servo_mode != MODE_PROBING {
+                    // The servo cut the probe short (its safe state: a late force sample) and
+                    // will send no request for it: let the estimator go and wait for the next
+                    // probe.
+                    out.push(Action::Signal(Board::Estimator, libc::SIGCONT));
+                    out.push(Action::Hold(Board::Estimator, false));
+                    Phase::WaitProbe {
+                        since_s: sim_s,
+                        abandoned: abandoned + 1,
                     }
                 } else if now.duration_since(since) > REQUEST_WAIT {
                     out.push(Action::Signal(Board::Estimator, libc::SIGCONT));
@@ -286,13 +322,14 @@ impl Injector {
                     self.next += 1;
                     Phase::Idle
                 } else {
-                    Phase::FrozenForRequest { since }
+                    Phase::FrozenForRequest { since, abandoned }
                 }
             }
             // Still held when killed: the supervisor lifts the hold when it reaps the process,
             // so its stall policy does not count this kill as a stall of its own.
-            Phase::KillAt { at } if now >= at => {
-                self.kill(Board::Estimator, sim_s, servo_mode, boards, &mut out, "")
+            Phase::KillAt { at, abandoned } if now >= at => {
+                let note = abandoned_note(abandoned, "");
+                self.kill(Board::Estimator, sim_s, servo_mode, boards, &mut out, &note)
             }
             p @ Phase::KillAt { .. } => p,
             Phase::Frozen {
@@ -425,5 +462,80 @@ impl Injector {
                 } += 1;
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ipc;
+
+    fn signals(actions: &[Action]) -> Vec<i32> {
+        actions
+            .iter()
+            .filter_map(|a| match a {
+                Action::Signal(Board::Estimator, s) => Some(*s),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// A probe cut short while the estimator is frozen for it: the estimator is let go at once
+    /// and frozen again at the next probe, whose request is then killed in flight.
+    #[test]
+    fn a_probe_cut_short_rearms_the_mid_request_kill() {
+        let prefix = format!("ut_chaos_{}", std::process::id());
+        let node = ipc::node(&prefix, "injector_test").unwrap();
+        let service = ipc::wrench(&node).unwrap();
+        let publisher = service.publisher_builder().create().unwrap();
+        let plan = vec![PlannedFault {
+            at_s: 1.0,
+            kind: FaultKind::KillEstimatorMidRequest,
+        }];
+        let mut inj = Injector::new(plan, publisher);
+        let up = BoardView {
+            pid: 42,
+            up_for: Duration::from_secs(5),
+            data_since: Some(Instant::now()),
+            stall_policy: true,
+        };
+        let boards = [up; 3];
+        let (track, probing, awaiting, resuming) = (0, MODE_PROBING, MODE_AWAITING, 4);
+        assert!(inj.step(0.5, track, &boards, None).is_empty());
+        assert!(inj.step(1.0, track, &boards, None).is_empty());
+        assert_eq!(
+            signals(&inj.step(1.1, probing, &boards, None)),
+            [libc::SIGSTOP]
+        );
+        assert!(inj.step(1.2, probing, &boards, None).is_empty());
+        // The servo's safe state aborts the probe: no request will come.
+        let thaw = inj.step(1.3, resuming, &boards, None);
+        assert_eq!(signals(&thaw), [libc::SIGCONT]);
+        assert!(thaw.contains(&Action::Hold(Board::Estimator, false)));
+        assert!(inj.records().is_empty());
+        assert!(inj.step(2.0, track, &boards, None).is_empty());
+        assert_eq!(
+            signals(&inj.step(3.0, probing, &boards, None)),
+            [libc::SIGSTOP]
+        );
+        assert!(inj.step(4.0, awaiting, &boards, None).is_empty());
+        std::thread::sleep(REQUEST_KILL_DELAY);
+        assert_eq!(
+            signals(&inj.step(4.1, awaiting, &boards, None)),
+            [libc::SIGKILL]
+        );
+        let r = &inj.records()[0];
+        assert_eq!(r.servo_mode, MODE_AWAITING);
+        assert!(!r.thawed);
+        assert!(r.note.contains("cut 1 probe(s) short"), "{}", r.note);
+        drop((inj, service, node));
+        // The domain's node-id segment outlives its nodes by design; the rest went with them.
+        let removed = ipc::remove_leftovers(&prefix).unwrap();
+        assert!(removed.is_empty(), "{removed:?}");
+        assert!(
+            ipc::leftovers(&prefix).is_empty(),
+            "{:?}",
+            ipc::leftovers(&prefix)
+        );
     }
 }

@@ -129,7 +129,9 @@ fn estimator_killed_mid_request_answers_after_the_restart() {
     assert_passed(&out, &r);
     let mid = faults_of(&r, "kill-estimator-mid-request")[0];
     assert_eq!(mid["servo_mode"], 3, "not killed mid-request: {mid}");
-    assert_eq!(mid["note"], "", "{mid}");
+    // A probe the servo cut short (a VM stall put it in its safe state) sends no request: the
+    // injector lets the estimator go and waits for the next probe, noting it; never thawed.
+    assert_eq!(mid["thawed"], false, "{mid}");
     let est = &r["loop"]["estimator"];
     assert!(est["retries"].as_u64().unwrap() >= 1, "{est}");
     assert!(est["answers"].as_u64().unwrap() >= 1, "{est}");
