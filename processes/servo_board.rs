@@ -11,8 +11,8 @@
 use crate::ipc::{self, Svc};
 use crate::{hist, rt};
 use afs_shared::msg::{
-    self, LoopStats, Quantiles, SERVO_FORCE_VALID, STATS_MLOCKED, STATS_PINNED, STATS_SCHED_FIFO,
-    TangentRequestHeader, TangentResponse, WorldSnapshot,
+    self, LoopStats, PlantSample, Quantiles, SERVO_FORCE_VALID, STATS_MLOCKED, STATS_PINNED,
+    STATS_SCHED_FIFO, TangentRequestHeader, TangentResponse, WorldSnapshot,
 };
 use afs_shared::plant::{Plant, PlantState};
 use afs_shared::scenario::{self, DriverMemo, DriverState, Scenario};
@@ -342,7 +342,9 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
             snapshot = Some(s);
         }
     }
-    let mut seq = snapshot.map_or(0, |s| s.seq + 1);
+    // A resumed servo starts by sending its predecessor's last tick again (below), then
+    // continues with the next one.
+    let mut seq = snapshot.map_or(0, |s| s.seq);
     // Ticks 1..=tick_limit are the scenario's (0 is the world's first sample): the same count
     // the lockstep runs, whatever restarts happen in between.
     let tick_limit = (duration / dt).round() as u64;
@@ -359,10 +361,19 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
         ..GateParams::default()
     });
     // The world's first sample, published once (a sensor that connects later gets it as the
-    // service's history); every later sample has the next sequence number.
+    // service's history); every later sample has the next sequence number. After a restart it
+    // is the last tick of the previous servo, bit for bit as that one wrote it to the world
+    // blackboard before sending it: if the previous servo died between the two, the tick is
+    // delivered now; if not, subscribers recognise the repeat (docs/reliability.md).
     let t_wait = rt::monotonic_ns();
-    let mut p0 = scenario::plant_sample(plant.truth(), seq, t_wait);
-    p0.publish_ns = rt::monotonic_ns();
+    let p0 = match snapshot {
+        Some(s) if s.plant.version == msg::VERSION && s.plant.seq == s.seq => s.plant,
+        _ => {
+            let mut p = scenario::plant_sample(plant.truth(), seq, t_wait);
+            p.publish_ns = rt::monotonic_ns();
+            p
+        }
+    };
     let _ = plant_pub.send_copy(p0);
     seq += 1;
     let mut next = t_wait;
@@ -455,9 +466,10 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
             end = ServoEnd::Stopped;
             break;
         }
-        // Force data through the gate.
+        // Force data through the gate, judged against the clock at receipt: the sensor board
+        // outranks the servo on its core and may publish after this tick woke.
         while let Ok(Some(s)) = wrench_sub.receive() {
-            gate.offer(s.payload(), now);
+            gate.offer(s.payload(), rt::monotonic_ns());
         }
         let current = gate.current(now);
         let (q, qd) = plant.joints();
@@ -512,6 +524,11 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
             s.force_age_ns = age;
         }
         p.publish_ns = rt::monotonic_ns();
+        // The world first, then the sample: a servo killed between the two leaves a tick its
+        // successor sends again, never one that is sent twice with different contents.
+        if let Some(e) = &world_entry {
+            e.update_with_copy(snapshot_of(&plant, &servo, &driver, p));
+        }
         if plant_pub.send_copy(p).is_err() {
             stats.publish_failures += 1;
         }
@@ -520,9 +537,6 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
             stats.publish_failures += 1;
         }
         link.tick(&mut servo, now);
-        if let Some(e) = &world_entry {
-            e.update_with_copy(snapshot_of(&plant, &servo, &driver, seq));
-        }
 
         // Loop statistics.
         let exec = rt::monotonic_ns().saturating_sub(now);
@@ -561,7 +575,7 @@ fn snapshot_of(
     plant: &Plant,
     servo: &ServoCore,
     driver: &scenario::ScenarioDriver,
-    seq: u64,
+    plant_sample: PlantSample,
 ) -> WorldSnapshot {
     let st = plant.state();
     let memo = driver.memo();
@@ -572,7 +586,7 @@ fn snapshot_of(
     WorldSnapshot {
         version: msg::VERSION,
         driver_leg: memo.leg.unwrap_or(u32::MAX),
-        seq,
+        seq: plant_sample.seq,
         time_s: st.time_s,
         q_rad: st.q,
         qd_rad_per_s: st.qd,
@@ -582,6 +596,7 @@ fn snapshot_of(
         a_omega_m_per_s: servo.resume_a_omega(),
         velocity_m_per_s: servo.resume_velocity(),
         driver_leg_start: [memo.leg_start_s, memo.leg_start_u],
+        plant: plant_sample,
     }
 }
 

@@ -507,6 +507,10 @@ struct Joiner {
     servo: VecDeque<ServoSample>,
     last_plant: Option<u64>,
     last_servo: Option<u64>,
+    /// The newest world sample, to recognise a restarted servo's repeat of it.
+    newest_plant: Option<PlantSample>,
+    /// World samples a restarted servo sent again, bit-identical, and dropped here.
+    plant_repeats: u64,
     plant_received: u64,
     servo_received: u64,
     plant_gaps: u64,
@@ -518,6 +522,32 @@ struct Joiner {
 }
 
 impl Joiner {
+    /// True (and counted) if `p` is the newest world sample again, bit for bit: a restarted
+    /// servo's first sample repeats its predecessor's last tick, which may or may not have
+    /// been delivered (servo_board.rs). Anything else with an old sequence number is
+    /// `reordered`.
+    fn is_repeat(&mut self, p: &PlantSample) -> bool {
+        fn bits(s: &PlantSample) -> &[u8] {
+            // SAFETY: PlantSample is repr(C) plain data without padding (docs/messages.md):
+            // every byte is initialised.
+            unsafe {
+                std::slice::from_raw_parts(
+                    (s as *const PlantSample).cast::<u8>(),
+                    std::mem::size_of::<PlantSample>(),
+                )
+            }
+        }
+        if self
+            .newest_plant
+            .as_ref()
+            .is_some_and(|n| bits(n) == bits(p))
+        {
+            self.plant_repeats += 1;
+            return true;
+        }
+        false
+    }
+
     fn push_plant(&mut self, p: PlantSample) {
         self.plant_received += 1;
         if let Some(l) = self.last_plant {
@@ -532,6 +562,7 @@ impl Joiner {
             }
         }
         self.last_plant = Some(p.seq);
+        self.newest_plant = Some(p);
         self.plant.push_back(p);
     }
 
@@ -954,6 +985,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunOutcome> {
         "friction": run.friction.as_ref().map(friction_json),
         "samples": {
             "plant_received": run.joiner.plant_received,
+            "plant_repeats_dropped": run.joiner.plant_repeats,
             "servo_received": run.joiner.servo_received,
             "paired": run.joiner.paired,
             "plant_lost": run.joiner.plant_lost,
@@ -1217,6 +1249,9 @@ fn supervise(
                 && sv.state == ProcState::Running
             {
                 sv.data_flowing(last_plant_at);
+            }
+            if out.joiner.is_repeat(&p) {
+                continue;
             }
             last_time_s = p.time_s;
             if let Some(r) = recorder.as_mut() {
@@ -1588,4 +1623,38 @@ pub fn status(prefix: &str, wait: Duration) -> Result<Value> {
         "loop": l.as_ref().map(loop_stats_json),
         "friction": f.as_ref().map(friction_json),
     }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn plant(seq: u64, x: f64) -> PlantSample {
+        PlantSample {
+            seq,
+            time_s: x,
+            ..Default::default()
+        }
+    }
+
+    /// A restarted servo's repeat of the last tick is dropped whether or not the tick had
+    /// arrived; a different sample with an old sequence number is still reordering.
+    #[test]
+    fn a_repeated_world_sample_is_dropped_and_a_different_one_is_not() {
+        let mut j = Joiner::default();
+        for p in [plant(0, 0.0), plant(1, 0.1)] {
+            assert!(!j.is_repeat(&p));
+            j.push_plant(p);
+        }
+        assert!(j.is_repeat(&plant(1, 0.1)));
+        assert!(!j.is_repeat(&plant(1, 0.2)));
+        j.push_plant(plant(1, 0.2));
+        // The tick never arrived from the dead servo: its repeat is the next tick.
+        assert!(!j.is_repeat(&plant(2, 0.3)));
+        j.push_plant(plant(2, 0.3));
+        assert_eq!(
+            (j.plant_repeats, j.reordered, j.plant_lost, j.plant_received),
+            (1, 1, 0, 4)
+        );
+    }
 }

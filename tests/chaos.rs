@@ -275,6 +275,12 @@ fn soak_fifty_random_kills() {
     assert!(servo_kills > 0);
     assert_eq!(process(&r, "servo")["restarts"].as_u64(), Some(servo_kills));
     assert!(s["servo_lost"].as_u64().unwrap() <= servo_kills, "{s}");
+    // Each restarted servo sends its predecessor's last tick once more; a repeat that had
+    // arrived is dropped, never counted as received twice.
+    assert!(
+        s["plant_repeats_dropped"].as_u64().unwrap() <= servo_kills,
+        "{s}"
+    );
     let (before, after) = (
         &c["steady_before_first_fault"],
         &c["steady_after_last_fault"],

@@ -1,7 +1,7 @@
 //! `afs-sensor`: the force-sensor board (its own 7 kHz clock and the sensor model).
 //!
 //! ```text
-//! afs-sensor --prefix afs --scenario surface-tracking --cpu 1 --priority 70
+//! afs-sensor --prefix afs --scenario surface-tracking --cpu 1 --priority 85
 //! ```
 
 use afs::board::{Common, stop_flag};

@@ -231,6 +231,10 @@ pub struct ServoSample {
     pub reprobes: u32,
     /// Failed estimations.
     pub failures: u32,
+    /// Estimations abandoned because the force data was lost mid-probe (the safe state).
+    pub aborted: u32,
+    /// Entries into the safe state.
+    pub safe_entries: u32,
 }
 
 /// [`ServoMode`] as a number: 0 track, 1 stopping, 2 probing, 3 awaiting estimate, 4 resuming.
@@ -292,6 +296,8 @@ impl ServoSample {
         self.estimates = n(c.estimates);
         self.reprobes = n(c.reprobes);
         self.failures = n(c.failures);
+        self.aborted = n(c.aborted);
+        self.safe_entries = n(c.safe_entries);
     }
 }
 
@@ -956,6 +962,10 @@ pub struct WorldSnapshot {
     pub velocity_m_per_s: f64,
     /// The driver's leg start: time (s) and surface position (m).
     pub driver_leg_start: [f64; 2],
+    /// The world sample of tick `seq`, exactly as published (written before it is sent): a
+    /// restarted servo sends it again, so the tick reaches subscribers whether or not its
+    /// predecessor died before sending it; a subscriber drops a bit-identical repeat.
+    pub plant: PlantSample,
 }
 
 /// One field of a message's byte layout.
@@ -1056,6 +1066,7 @@ pub fn layouts() -> Vec<MessageLayout> {
             tangent_velocity_m_per_s: "f64",
             tangent_angle_rad: "f64", set_point_m: "f64[2]", torque_nm: "f64[2]",
             estimations_started: "u32", estimates: "u32", reprobes: "u32", failures: "u32",
+            aborted: "u32", safe_entries: "u32",
         ]),
         layout!(Quantiles, "Quantiles", [
             p50: "u64", p90: "u64", p99: "u64", p999: "u64", p9999: "u64", max: "u64",
@@ -1126,6 +1137,7 @@ pub fn layouts() -> Vec<MessageLayout> {
             qd_rad_per_s: "f64[2]", friction_face: "u64[2]",
             friction_deflection_m: "f64[2]", tangent_angle_rad: "f64",
             a_omega_m_per_s: "f64", velocity_m_per_s: "f64", driver_leg_start: "f64[2]",
+            plant: "PlantSample",
         ]),
     ]
 }
@@ -1164,6 +1176,17 @@ mod tests {
                 l.markdown()
             );
         }
+    }
+
+    /// The supervisor recognises a repeated world sample by its bytes
+    /// (`supervisor::Joiner::is_repeat`): PlantSample must have no padding.
+    #[test]
+    fn plant_sample_has_no_padding() {
+        let l = layouts()
+            .into_iter()
+            .find(|l| l.rust == "PlantSample")
+            .unwrap();
+        assert_eq!(l.fields.iter().map(|f| f.size).sum::<usize>(), l.size);
     }
 
     /// The type names clients must use.

@@ -684,6 +684,8 @@ impl ScenarioMonitor {
             estimates: s.estimates as usize,
             reprobes: s.reprobes as usize,
             failures: s.failures as usize,
+            aborted: s.aborted as usize,
+            safe_entries: s.safe_entries as usize,
             ..self.counters
         };
         if s.flags & SERVO_SAFE != 0 {
