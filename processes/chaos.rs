@@ -101,21 +101,17 @@ pub struct BadCounts {
 
 enum Phase {
     Idle,
-    /// Waiting for the servo to probe (since this simulated time); `abandoned` probes were
-    /// cut short before their request went out.
+    /// Waiting for the servo to probe (since this simulated time).
     WaitProbe {
         since_s: f64,
-        abandoned: u32,
     },
     /// Estimator frozen at the probe's start; waiting for the request.
     FrozenForRequest {
         since: Instant,
-        abandoned: u32,
     },
     /// The request is out; kill at this instant.
     KillAt {
         at: Instant,
-        abandoned: u32,
     },
     /// Frozen; waiting for the stall policy.
     Frozen {
@@ -131,19 +127,6 @@ enum Phase {
     },
 }
 
-/// The note of a mid-request kill after `abandoned` probes were cut short, followed by `note`.
-fn abandoned_note(abandoned: u32, note: &str) -> String {
-    if abandoned == 0 {
-        return note.into();
-    }
-    let first = format!("the servo cut {abandoned} probe(s) short first; waited for the next");
-    if note.is_empty() {
-        first
-    } else {
-        format!("{first}; {note}")
-    }
-}
-
 /// Injects the planned faults.
 pub struct Injector {
     plan: Vec<PlannedFault>,
@@ -153,6 +136,8 @@ pub struct Injector {
     publisher: Publisher<Svc, WrenchSample, ()>,
     records: Vec<FaultRecord>,
     bad: BadCounts,
+    /// Probes the servo cut short while the pending fault waited for one; noted in its record.
+    probes_cut_short: u32,
 }
 
 impl Injector {
@@ -166,6 +151,7 @@ impl Injector {
             publisher,
             records: Vec::new(),
             bad: BadCounts::default(),
+            probes_cut_short: 0,
         }
     }
 
@@ -242,10 +228,7 @@ impl Injector {
                         }
                     }
                     FaultKind::KillMidProbe(_) | FaultKind::KillEstimatorMidRequest => {
-                        Phase::WaitProbe {
-                            since_s: sim_s,
-                            abandoned: 0,
-                        }
+                        Phase::WaitProbe { since_s: sim_s }
                     }
                     FaultKind::BadSamples => match genuine {
                         Some(g) => {
@@ -258,44 +241,39 @@ impl Injector {
                     },
                 }
             }
-            Phase::WaitProbe { since_s, abandoned } => {
+            Phase::WaitProbe { since_s } => {
                 let f = self.plan[self.next];
                 let probing = servo_mode == MODE_PROBING;
                 let late = sim_s - since_s > PROBE_WAIT_S;
                 let note = if probing {
-                    String::new()
+                    ""
                 } else {
-                    "the servo did not probe in time; injected anyway".into()
+                    "the servo did not probe in time; injected anyway"
                 };
-                let waiting = Phase::WaitProbe { since_s, abandoned };
+                let waiting = Phase::WaitProbe { since_s };
                 match f.kind {
                     FaultKind::KillMidProbe(b) if probing || late => {
                         if view(b).pid == 0 {
                             waiting
                         } else {
-                            self.kill(b, sim_s, servo_mode, boards, &mut out, &note)
+                            self.kill(b, sim_s, servo_mode, boards, &mut out, note)
                         }
                     }
                     FaultKind::KillEstimatorMidRequest if probing => {
                         out.push(Action::Hold(Board::Estimator, true));
                         out.push(Action::Signal(Board::Estimator, libc::SIGSTOP));
-                        Phase::FrozenForRequest {
-                            since: now,
-                            abandoned,
-                        }
+                        Phase::FrozenForRequest { since: now }
                     }
                     FaultKind::KillEstimatorMidRequest if late => {
-                        let note = abandoned_note(abandoned, &note);
-                        self.kill(Board::Estimator, sim_s, servo_mode, boards, &mut out, &note)
+                        self.kill(Board::Estimator, sim_s, servo_mode, boards, &mut out, note)
                     }
                     _ => waiting,
                 }
             }
-            Phase::FrozenForRequest { since, abandoned } => {
+            Phase::FrozenForRequest { since } => {
                 if servo_mode == MODE_AWAITING {
                     Phase::KillAt {
                         at: now + REQUEST_KILL_DELAY,
-                        abandoned,
                     }
                 } else if servo_mode != MODE_PROBING {
                     // The servo cut the probe short (its safe state: a late force sample) and
@@ -303,10 +281,8 @@ impl Injector {
                     // probe.
                     out.push(Action::Signal(Board::Estimator, libc::SIGCONT));
                     out.push(Action::Hold(Board::Estimator, false));
-                    Phase::WaitProbe {
-                        since_s: sim_s,
-                        abandoned: abandoned + 1,
-                    }
+                    self.probes_cut_short += 1;
+                    Phase::WaitProbe { since_s: sim_s }
                 } else if now.duration_since(since) > REQUEST_WAIT {
                     out.push(Action::Signal(Board::Estimator, libc::SIGCONT));
                     out.push(Action::Hold(Board::Estimator, false));
@@ -322,14 +298,13 @@ impl Injector {
                     self.next += 1;
                     Phase::Idle
                 } else {
-                    Phase::FrozenForRequest { since, abandoned }
+                    Phase::FrozenForRequest { since }
                 }
             }
             // Still held when killed: the supervisor lifts the hold when it reaps the process,
             // so its stall policy does not count this kill as a stall of its own.
-            Phase::KillAt { at, abandoned } if now >= at => {
-                let note = abandoned_note(abandoned, "");
-                self.kill(Board::Estimator, sim_s, servo_mode, boards, &mut out, &note)
+            Phase::KillAt { at } if now >= at => {
+                self.kill(Board::Estimator, sim_s, servo_mode, boards, &mut out, "")
             }
             p @ Phase::KillAt { .. } => p,
             Phase::Frozen {
@@ -395,6 +370,17 @@ impl Injector {
 
     fn record(&mut self, sim_s: f64, servo_mode: u32, pid: i32, note: &str) {
         let f = self.plan[self.next];
+        let note = match std::mem::take(&mut self.probes_cut_short) {
+            0 => note.to_string(),
+            n => {
+                let first = format!("the servo cut {n} probe(s) short first; waited for the next");
+                if note.is_empty() {
+                    first
+                } else {
+                    format!("{first}; {note}")
+                }
+            }
+        };
         self.records.push(FaultRecord {
             kind: f.kind.name(),
             due_s: f.at_s,
@@ -405,7 +391,7 @@ impl Injector {
             detected_ms: None,
             back_ms: None,
             thawed: false,
-            note: note.into(),
+            note,
         });
     }
 

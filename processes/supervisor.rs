@@ -505,11 +505,11 @@ impl Proc {
 struct Joiner {
     plant: VecDeque<PlantSample>,
     servo: VecDeque<ServoSample>,
-    last_plant: Option<u64>,
     last_servo: Option<u64>,
-    /// The newest world sample, to recognise a restarted servo's repeat of it.
+    /// The newest world sample in order (its `seq` is the last tick received); a restarted
+    /// servo's first sample may repeat it.
     newest_plant: Option<PlantSample>,
-    /// World samples a restarted servo sent again, bit-identical, and dropped here.
+    /// World samples a restarted servo sent again, identical, and dropped here.
     plant_repeats: u64,
     plant_received: u64,
     servo_received: u64,
@@ -522,35 +522,19 @@ struct Joiner {
 }
 
 impl Joiner {
-    /// True (and counted) if `p` is the newest world sample again, bit for bit: a restarted
+    /// True (and counted) if `p` equals the newest world sample in every field: a restarted
     /// servo's first sample repeats its predecessor's last tick, which may or may not have
     /// been delivered (servo_board.rs). Anything else with an old sequence number is
     /// `reordered`.
     fn is_repeat(&mut self, p: &PlantSample) -> bool {
-        fn bits(s: &PlantSample) -> &[u8] {
-            // SAFETY: PlantSample is repr(C) plain data without padding (docs/messages.md):
-            // every byte is initialised.
-            unsafe {
-                std::slice::from_raw_parts(
-                    (s as *const PlantSample).cast::<u8>(),
-                    std::mem::size_of::<PlantSample>(),
-                )
-            }
-        }
-        if self
-            .newest_plant
-            .as_ref()
-            .is_some_and(|n| bits(n) == bits(p))
-        {
-            self.plant_repeats += 1;
-            return true;
-        }
-        false
+        let repeat = self.newest_plant.as_ref() == Some(p);
+        self.plant_repeats += u64::from(repeat);
+        repeat
     }
 
     fn push_plant(&mut self, p: PlantSample) {
         self.plant_received += 1;
-        if let Some(l) = self.last_plant {
+        if let Some(l) = self.newest_plant.map(|n| n.seq) {
             if p.seq <= l {
                 self.reordered += 1;
                 return;
@@ -561,7 +545,6 @@ impl Joiner {
                 self.max_gap_ticks = self.max_gap_ticks.max(p.seq - l - 1);
             }
         }
-        self.last_plant = Some(p.seq);
         self.newest_plant = Some(p);
         self.plant.push_back(p);
     }
@@ -1438,7 +1421,7 @@ fn supervise(
                 p.restarts += 1;
                 p.restart_at = None;
                 let resume = p.spec.name == "servo";
-                if resume && let Some(last) = out.joiner.last_plant {
+                if resume && let Some(last) = out.joiner.newest_plant.map(|n| n.seq) {
                     out.faults.servo_restarted_at(last + 1);
                 }
                 if let Err(e) = p.spawn(launch, resume) {

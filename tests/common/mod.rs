@@ -34,6 +34,17 @@ pub fn json_of(out: &Output) -> Value {
     })
 }
 
+/// Asserts `out` is a clear refusal of `what`: exit status 2, `needle` in stderr, no panic.
+pub fn assert_refused(out: &Output, what: &dyn std::fmt::Debug, needle: &str) {
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{what:?}: {err}");
+    assert!(
+        err.contains(needle),
+        "{what:?}: expected '{needle}' in: {err}"
+    );
+    assert!(!err.contains("panicked"), "{what:?}: {err}");
+}
+
 /// `afs run --json --quiet --prefix <prefix> <args>` started in the background, its output
 /// piped, killed if the test fails before it ends.
 pub fn start_run(prefix: &str, args: &[&str]) -> KillOnDrop {
