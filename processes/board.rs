@@ -2,9 +2,14 @@
 //! the stop flag set by SIGINT/SIGTERM/SIGHUP.
 
 use crate::experiment::load_config;
+use crate::ipc::{self, Svc};
+use crate::rt;
+use afs_shared::msg::{self, BoardStartup};
 use afs_shared::scenario::Scenario;
 use afs_shared::sim::SimConfig;
 use anyhow::Result;
+use iceoryx2::node::Node;
+use iceoryx2::port::publisher::Publisher;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -59,4 +64,58 @@ pub fn stop_flag() -> Result<Arc<AtomicBool>> {
     ctrlc::set_handler(move || s.store(true, Ordering::Relaxed))
         .map_err(|e| anyhow::anyhow!("installing the signal handler: {e}"))?;
     Ok(stop)
+}
+
+/// A board's start-up report in the making: each phase's end is stamped as it happens
+/// ([`rt::monotonic_ns`]) and the report goes out once, when the board's data flows
+/// (`afs/boards/startup`, read by the supervisor to explain each restart's time).
+pub struct Startup {
+    /// The phases so far.
+    pub report: BoardStartup,
+    publisher: Option<Publisher<Svc, BoardStartup, ()>>,
+    sent: bool,
+}
+
+impl Startup {
+    /// Starts the clock of `board` (a `msg::BOARD_*` code) at `main_ns`, the time `main` was
+    /// entered.
+    pub fn new(board: u32, main_ns: u64) -> Self {
+        Self {
+            report: BoardStartup {
+                version: msg::VERSION,
+                board,
+                pid: std::process::id() as i32,
+                main_ns,
+                ..Default::default()
+            },
+            publisher: None,
+            sent: false,
+        }
+    }
+
+    /// The current time, for a phase field.
+    pub fn now() -> u64 {
+        rt::monotonic_ns()
+    }
+
+    /// Opens the report's publisher on `node` (with the board's other ports).
+    pub fn open(&mut self, node: &Node<Svc>) -> Result<()> {
+        self.publisher = Some(
+            ipc::startup(node)?
+                .publisher_builder()
+                .create()
+                .map_err(|e| anyhow::anyhow!("start-up publisher: {e:?}"))?,
+        );
+        Ok(())
+    }
+
+    /// Sends the report (once; later calls do nothing). A failed send only loses the report.
+    pub fn send(&mut self) {
+        if let Some(p) = self.publisher.as_ref()
+            && !self.sent
+        {
+            let _ = p.send_copy(self.report);
+            self.sent = true;
+        }
+    }
 }

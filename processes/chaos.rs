@@ -5,17 +5,20 @@
 //! fault is due (simulated time, and the servo's mode for the mid-probe and mid-request
 //! kinds), returns the signals to send, publishes the bad force samples itself, and times the
 //! recovery (until the killed board's data flows again). One fault is in progress at a time; a
-//! fault waits until its board has run for [`MIN_UPTIME`].
+//! fault waits until its board's data has flowed for [`MIN_UPTIME`].
 
 use crate::ipc::Svc;
 use crate::rt;
+use crate::supervisor::Timeline;
 use afs_shared::faults::{BadSample, Board, FaultKind, PlannedFault};
 use afs_shared::msg::{WRENCH_INJECTED, WrenchSample};
 use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::update_connections::UpdateConnections;
 use serde::Serialize;
 use std::time::{Duration, Instant};
 
-/// A board is only faulted again after it has run this long.
+/// A board is only faulted again after its data has flowed this long (longer than the
+/// supervisor's `HEALTHY_AFTER`, so an injected fault never looks like a crash loop).
 pub const MIN_UPTIME: Duration = Duration::from_millis(500);
 /// A frozen board with no stall policy gets SIGCONT after this long.
 const THAW_AFTER: Duration = Duration::from_secs(1);
@@ -38,10 +41,8 @@ const MODE_AWAITING: u32 = 3;
 pub struct BoardView {
     /// Its pid (0: none running).
     pub pid: i32,
-    /// How long the current process has run.
-    pub up_for: Duration,
     /// When the current process's data started to flow (sensor: its first wrench sample;
-    /// servo: its first world sample; estimator: its start).
+    /// servo: its first world sample; estimator: its ports open, from its start-up report).
     pub data_since: Option<Instant>,
     /// The supervisor kills it when silent (`stall_ms` > 0).
     pub stall_policy: bool,
@@ -80,6 +81,9 @@ pub struct FaultRecord {
     pub thawed: bool,
     /// Anything unusual.
     pub note: String,
+    /// Where the faulted board's restart spent its time (from the supervisor's exit record of
+    /// `pid`).
+    pub restart: Option<Timeline>,
 }
 
 /// Bad samples sent, by kind.
@@ -198,6 +202,9 @@ impl Injector {
         genuine: Option<&WrenchSample>,
     ) -> Vec<Action> {
         let now = Instant::now();
+        // The burst publisher sends rarely: drop its connections to dead subscribers (a killed
+        // servo's) as soon as iceoryx2 has cleaned them, not at the next burst.
+        let _ = self.publisher.update_connections();
         let view = |b: Board| boards[b as usize];
         let mut out = Vec::new();
         let phase = std::mem::replace(&mut self.phase, Phase::Idle);
@@ -211,7 +218,10 @@ impl Injector {
                 }
                 if let Some(b) = f.kind.target() {
                     let v = view(b);
-                    if v.pid == 0 || v.up_for < MIN_UPTIME || v.data_since.is_none() {
+                    if v.pid == 0
+                        || v.data_since
+                            .is_none_or(|t| now.duration_since(t) < MIN_UPTIME)
+                    {
                         return out;
                     }
                 }
@@ -392,6 +402,7 @@ impl Injector {
             back_ms: None,
             thawed: false,
             note,
+            restart: None,
         });
     }
 
@@ -481,8 +492,7 @@ mod tests {
         let mut inj = Injector::new(plan, publisher);
         let up = BoardView {
             pid: 42,
-            up_for: Duration::from_secs(5),
-            data_since: Some(Instant::now()),
+            data_since: Instant::now().checked_sub(Duration::from_secs(5)),
             stall_policy: true,
         };
         let boards = [up; 3];

@@ -6,6 +6,7 @@
 //! would have. It runs at normal priority on its own core and polls its ports every
 //! millisecond.
 
+use crate::board::Startup;
 use crate::ipc;
 use crate::rt;
 use afs_shared::ident::OnlineFrictionId;
@@ -34,9 +35,10 @@ pub struct EstimatorSummary {
     pub friction_reports: u64,
 }
 
-/// Runs until `stop` is set.
-pub fn run(prefix: &str, stop: &AtomicBool) -> Result<EstimatorSummary> {
+/// Runs until `stop` is set; `startup` is the start-up report begun in `main`.
+pub fn run(prefix: &str, mut startup: Startup, stop: &AtomicBool) -> Result<EstimatorSummary> {
     let node = ipc::node(prefix, "estimator")?;
+    startup.report.node_ns = Startup::now();
     let tangent_server = ipc::tangent(&node)?
         .server_builder()
         .create()
@@ -54,6 +56,11 @@ pub fn run(prefix: &str, stop: &AtomicBool) -> Result<EstimatorSummary> {
         .buffer_size(ipc::TICK_BUFFER)
         .create()
         .map_err(|e| anyhow::anyhow!("servo subscriber: {e:?}"))?;
+    startup.open(&node)?;
+    startup.report.ports_ns = Startup::now();
+    // It serves from here on.
+    startup.report.data_ns = startup.report.ports_ns;
+    startup.send();
     let mut ident = OnlineFrictionId::new(0.2, 0.25, 4096);
     let mut summary = EstimatorSummary::default();
     let mut report = FrictionReport {
@@ -70,6 +77,11 @@ pub fn run(prefix: &str, stop: &AtomicBool) -> Result<EstimatorSummary> {
     let mut next_report = rt::monotonic_ns() + 1_000_000_000;
     while !stop.load(Ordering::Relaxed) {
         std::thread::sleep(Duration::from_millis(1));
+        // Drop the connections of clients that died (a killed servo) as soon as iceoryx2 has
+        // removed them from the service, and connect new ones; without a change this only
+        // compares a counter.
+        let _ = tangent_server.update_connections();
+        let _ = rotation_server.update_connections();
         while let Ok(Some(s)) = servo_sub.receive() {
             if s.payload().version == msg::VERSION {
                 ident.push(&ident_tick(s.payload()));
@@ -157,10 +169,6 @@ pub fn run(prefix: &str, stop: &AtomicBool) -> Result<EstimatorSummary> {
         let now = rt::monotonic_ns();
         if now >= next_report {
             next_report = now + 1_000_000_000;
-            // Drop the connections of clients that died (a killed servo): their files would
-            // otherwise stay until the next request.
-            let _ = tangent_server.update_connections();
-            let _ = rotation_server.update_connections();
             let id = ident.report();
             report.seq += 1;
             report.windows = id.windows as u64;

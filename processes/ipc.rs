@@ -6,7 +6,7 @@
 //! stacks run side by side and a stack's leftovers are easy to find (`leftovers`).
 
 use afs_shared::msg::{
-    FrictionReport, LoopStats, PlantSample, RotationRequestHeader, RotationResponse,
+    BoardStartup, FrictionReport, LoopStats, PlantSample, RotationRequestHeader, RotationResponse,
     RotationSample, ServoSample, SupervisorStatus, TangentRequestHeader, TangentResponse,
     WorldSnapshot, WrenchSample, service,
 };
@@ -165,6 +165,21 @@ pub fn supervisor(
     node: &Node<Svc>,
 ) -> Result<publish_subscribe::PortFactory<Svc, SupervisorStatus, ()>> {
     status_stream(node, service::SUPERVISOR)
+}
+
+/// The boards' start-up reports: one publisher per board process (and room for dead ones not
+/// yet cleaned up), history 1 each.
+pub fn startup(node: &Node<Svc>) -> Result<publish_subscribe::PortFactory<Svc, BoardStartup, ()>> {
+    node.service_builder(&name(service::STARTUP)?)
+        .publish_subscribe::<BoardStartup>()
+        .enable_safe_overflow(true)
+        .history_size(1)
+        .subscriber_max_buffer_size(64)
+        .max_subscribers(8)
+        .max_publishers(16)
+        .max_nodes(24)
+        .open_or_create()
+        .map_err(|e| anyhow::anyhow!("opening service '{}': {e:?}", service::STARTUP))
 }
 
 /// An estimation service: requests are a slice of samples behind a header, one response each.
@@ -379,6 +394,35 @@ fn stale_scan(prefix: &str) -> Result<Vec<PathBuf>> {
         }
     }
     Ok(stale)
+}
+
+/// The processes whose ports a data segment or connection file of stack `prefix` belongs to,
+/// read from its name (`…_<port>.data`, `…_<sender port>_<receiver port>.connection`): an
+/// iceoryx2 port id is a `UniqueSystemId`, whose bits 64–95 are the pid of the process that
+/// created it.
+pub fn file_pids(path: &Path, prefix: &str) -> Vec<u32> {
+    let fp = file_prefix(prefix);
+    let Some((stem, ext)) = path
+        .file_name()
+        .and_then(|n| n.to_str())
+        .and_then(|n| n.strip_prefix(&fp))
+        .and_then(|n| n.rsplit_once('.'))
+    else {
+        return Vec::new();
+    };
+    let ports = match ext {
+        "data" => 1,
+        "connection" => 2,
+        _ => return Vec::new(),
+    };
+    let mut pids: Vec<u32> = stem
+        .rsplit('_')
+        .take(ports)
+        .filter_map(|p| p.parse::<u128>().ok())
+        .map(|id| (id >> 64) as u32)
+        .collect();
+    pids.reverse();
+    pids
 }
 
 /// Files of stack `prefix` left in /dev/shm and under the iceoryx2 root.

@@ -6,6 +6,7 @@
 //! with every sample as the tare; when the first world sample arrives it lets its filter settle
 //! on it for 10 ms before publishing, as the lockstep does.
 
+use crate::board::Startup;
 use crate::ipc;
 use crate::rt;
 use afs_shared::msg::{self, PlantSample, WRENCH_SATURATED, WrenchSample};
@@ -27,6 +28,8 @@ pub struct SensorArgs {
     pub cpu: Option<usize>,
     /// SCHED_FIFO priority (0: normal).
     pub priority: u8,
+    /// Monotonic time `main` was entered (ns), for the start-up report.
+    pub main_ns: u64,
 }
 
 /// What the board did.
@@ -41,7 +44,9 @@ pub struct SensorSummary {
 /// Runs until `stop` is set.
 pub fn run(args: &SensorArgs, stop: &AtomicBool) -> Result<SensorSummary> {
     args.params.validate().map_err(anyhow::Error::msg)?;
+    let mut startup = Startup::new(msg::BOARD_SENSOR, args.main_ns);
     let node = ipc::node(&args.prefix, "sensor")?;
+    startup.report.node_ns = Startup::now();
     let plant_sub = ipc::plant(&node)?
         .subscriber_builder()
         .buffer_size(64)
@@ -52,9 +57,13 @@ pub fn run(args: &SensorArgs, stop: &AtomicBool) -> Result<SensorSummary> {
         .backpressure_strategy(ipc::BACKPRESSURE)
         .create()
         .map_err(|e| anyhow::anyhow!("wrench publisher: {e:?}"))?;
+    startup.open(&node)?;
+    startup.report.ports_ns = Startup::now();
     let mut model = SensorModel::new(args.params, args.seed);
     let tare = afs_shared::sim::tare(&mut model);
+    startup.report.prepared_ns = Startup::now();
     let rtr = rt::setup(args.priority, true, args.cpu);
+    startup.report.rt_ns = Startup::now();
     for w in &rtr.warnings {
         eprintln!("afs-sensor: warning: {w}");
     }
@@ -80,6 +89,7 @@ pub fn run(args: &SensorArgs, stop: &AtomicBool) -> Result<SensorSummary> {
         }
         if let Some(p) = latest {
             if !warmed {
+                startup.report.input_ns = now;
                 for _ in 0..warm {
                     model.sample(p.sensor_wrench());
                 }
@@ -103,6 +113,10 @@ pub fn run(args: &SensorArgs, stop: &AtomicBool) -> Result<SensorSummary> {
             w.publish_ns = rt::monotonic_ns();
             if publisher.send_copy(w).is_ok() {
                 summary.published += 1;
+                if summary.published == 1 {
+                    startup.report.data_ns = w.publish_ns;
+                    startup.send();
+                }
             }
             seq += 1;
         }

@@ -8,6 +8,7 @@
 //! buffer and the probe record are allocated before the loop; iceoryx2 loans come from
 //! pre-mapped shared memory.
 
+use crate::board::Startup;
 use crate::ipc::{self, Svc};
 use crate::{hist, rt};
 use afs_shared::msg::{
@@ -58,6 +59,8 @@ pub struct ServoArgs {
     pub startup_timeout_s: f64,
     /// Save the wake, execution-time and force-age histograms here at the end.
     pub histograms: Option<PathBuf>,
+    /// Monotonic time `main` was entered (ns), for the start-up report.
+    pub main_ns: u64,
 }
 
 /// How the servo ended.
@@ -252,7 +255,9 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
         scenario.natural_duration_s
     };
 
+    let mut startup = Startup::new(msg::BOARD_SERVO, args.main_ns);
     let node = ipc::node(&args.prefix, "servo")?;
+    startup.report.node_ns = Startup::now();
     let plant_pub = ipc::plant(&node)?
         .publisher_builder()
         .backpressure_strategy(ipc::BACKPRESSURE)
@@ -305,6 +310,8 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
         ),
         None => None,
     };
+    startup.open(&node)?;
+    startup.report.ports_ns = Startup::now();
 
     // The world: fresh, or where the last servo left it.
     let q0 = cfg.start_configuration().map_err(anyhow::Error::msg)?;
@@ -374,7 +381,9 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
             p
         }
     };
+    startup.report.prepared_ns = t_wait;
     let _ = plant_pub.send_copy(p0);
+    startup.report.data_ns = Startup::now();
     seq += 1;
     let mut next = t_wait;
     let first = loop {
@@ -387,6 +396,7 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
             gate.offer(s.payload(), now);
         }
         if let Ok((w, _)) = gate.current(now) {
+            startup.report.input_ns = now;
             break w;
         }
         if now - t_wait > (args.startup_timeout_s * 1e9) as u64 {
@@ -440,6 +450,8 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
     };
     let mut timing = Timing::new()?;
     let rtr = rt::setup(args.priority, true, args.cpu);
+    startup.report.rt_ns = Startup::now();
+    startup.send();
     for w in &rtr.warnings {
         eprintln!("afs-servo: warning: {w}");
     }

@@ -13,8 +13,9 @@ use crate::record::{Rec, RecordSummary, Recorder};
 use crate::rt;
 use afs_shared::faults::{self, Board, FaultFigures, FaultKind, FaultMonitor};
 use afs_shared::msg::{
-    self, FRICTION_LAW_VALID, FRICTION_MU_VALID, FrictionReport, LoopStats, PlantSample,
-    ProcessStatus, ServoSample, SupervisorStatus, WRENCH_INJECTED, WrenchSample, fixed_str,
+    self, BoardStartup, FRICTION_LAW_VALID, FRICTION_MU_VALID, FrictionReport, LoopStats,
+    PlantSample, ProcessStatus, ServoSample, SupervisorStatus, WRENCH_INJECTED, WrenchSample,
+    fixed_str,
 };
 use afs_shared::scenario::{self, Agreement, Scenario, ScenarioReport};
 use afs_shared::sim::SimConfig;
@@ -259,10 +260,68 @@ enum ProcState {
 #[derive(Debug, Clone, Serialize)]
 struct ExitRecord {
     at_s: f64,
+    /// The process that ended.
+    pid: i32,
     status: String,
     restarted: bool,
     /// From the exit being seen to the restarted process's data flowing (ms).
     back_ms: Option<f64>,
+    /// Where the restart's time went (restarted processes only).
+    restart: Option<Timeline>,
+    /// Monotonic time the exit was seen (ns): the timeline's zero.
+    #[serde(skip)]
+    seen_ns: u64,
+    /// The process started in its place (0: none yet).
+    #[serde(skip)]
+    next_pid: i32,
+}
+
+/// Where a (re)start's time went: the end of each phase in ms after its zero (the exit being
+/// seen for a restart, the spawn for a first start); None: not reached, or not reported. The
+/// board's own phases come from its start-up report (`msg::BoardStartup`), stamped on the
+/// same monotonic clock.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct Timeline {
+    /// iceoryx2's dead-node clean-up, run by the supervisor when it saw the exit.
+    pub cleaned_ms: Option<f64>,
+    /// The backoff the restart policy chose (a duration).
+    pub backoff_ms: Option<f64>,
+    /// The new process spawned (fork and exec returned).
+    pub spawned_ms: Option<f64>,
+    /// Its `main` entered.
+    pub main_ms: Option<f64>,
+    /// Its iceoryx2 node created.
+    pub node_ms: Option<f64>,
+    /// Its services and ports open.
+    pub ports_ms: Option<f64>,
+    /// Its own preparation done (sensor model and tare, the servo's world restored).
+    pub prepared_ms: Option<f64>,
+    /// Its first input in hand (the sensor's first world sample, the servo's first force).
+    pub input_ms: Option<f64>,
+    /// Its real-time set-up done (mlockall, pinning, SCHED_FIFO).
+    pub rt_ms: Option<f64>,
+    /// Its first output published.
+    pub data_ms: Option<f64>,
+    /// The supervisor saw that output.
+    pub seen_ms: Option<f64>,
+}
+
+impl Timeline {
+    /// Milliseconds from `zero` to `t` (monotonic ns); None for 0 (a phase not stamped).
+    fn ms(zero: u64, t: u64) -> Option<f64> {
+        (t != 0).then_some((t as f64 - zero as f64) * 1e-6)
+    }
+
+    /// Fills the board's phases from its start-up report.
+    fn board(&mut self, zero: u64, r: &BoardStartup) {
+        self.main_ms = Self::ms(zero, r.main_ns);
+        self.node_ms = Self::ms(zero, r.node_ns);
+        self.ports_ms = Self::ms(zero, r.ports_ns);
+        self.prepared_ms = Self::ms(zero, r.prepared_ns);
+        self.input_ms = Self::ms(zero, r.input_ns);
+        self.rt_ms = Self::ms(zero, r.rt_ns);
+        self.data_ms = Self::ms(zero, r.data_ns);
+    }
 }
 
 struct Proc {
@@ -276,16 +335,17 @@ struct Proc {
     exits: Vec<ExitRecord>,
     started: Instant,
     stalls: u32,
-    /// Consecutive deaths within [`CRASH_LOOP_UPTIME`] of the start: the backoff's exponent.
+    /// Consecutive deaths before coming up healthy ([`HEALTHY_AFTER`]): the backoff's exponent.
     streak: u32,
-    /// When the last exit was seen.
-    exited_at: Option<Instant>,
     /// When the current process's data started to flow.
     data_since: Option<Instant>,
     /// Frozen on purpose by the fault injector: no stall policy.
     held: bool,
     /// Restarts that injected faults cost, not held against `max_restarts`.
     injected_budget: u32,
+    /// Monotonic time of the first spawn (ns), and that start's timeline.
+    first_spawn_ns: u64,
+    first_start: Timeline,
 }
 
 /// The first contact's transient is not a fault's: the normal force counts from here (s).
@@ -340,7 +400,10 @@ impl Footprint {
         Footprint {
             at_s: t0.elapsed().as_secs_f64(),
             shm_files: files.len(),
-            stale_files: stale.iter().map(|f| f.display().to_string()).collect(),
+            stale_files: stale
+                .iter()
+                .map(|f| describe_file(f, prefix, procs))
+                .collect(),
             shm_bytes: files
                 .iter()
                 .filter_map(|f| std::fs::metadata(f).ok())
@@ -350,6 +413,32 @@ impl Footprint {
             supervisor_rss_kib: rss_kib(std::process::id() as i32),
             boards_rss_kib,
         }
+    }
+}
+
+/// `f` with the processes its ports belong to, by board and pid (e.g. `… (supervisor 812 →
+/// servo 815, dead)`), so that a leak names who left it and who should have cleaned it.
+fn describe_file(f: &Path, prefix: &str, procs: &[Proc]) -> String {
+    let me = std::process::id();
+    let who = |pid: u32| -> String {
+        if pid == me {
+            return format!("supervisor {pid}");
+        }
+        for p in procs {
+            if p.pid() as u32 == pid {
+                return format!("{} {pid}", p.spec.name);
+            }
+            if p.exits.iter().any(|e| e.pid as u32 == pid) {
+                return format!("{} {pid}, dead", p.spec.name);
+            }
+        }
+        format!("pid {pid}")
+    };
+    let pids: Vec<String> = ipc::file_pids(f, prefix).into_iter().map(who).collect();
+    if pids.is_empty() {
+        f.display().to_string()
+    } else {
+        format!("{} ({})", f.display(), pids.join(" → "))
     }
 }
 
@@ -369,9 +458,9 @@ fn rss_kib(pid: i32) -> Rss {
     }
 }
 
-/// A process that ran this long before dying is not crash-looping: its next restart waits the
-/// first backoff again.
-const CRASH_LOOP_UPTIME: Duration = Duration::from_secs(1);
+/// A process whose data flowed this long came up healthy: its death is not a crash loop, and
+/// its next restart waits the first backoff again.
+const HEALTHY_AFTER: Duration = Duration::from_millis(250);
 
 fn exit_code(st: &std::process::ExitStatus) -> i32 {
     st.code().unwrap_or_else(|| -st.signal().unwrap_or(0))
@@ -418,29 +507,58 @@ impl Proc {
         unsafe {
             cmd.pre_exec(move || rt::die_with_parent(parent));
         }
+        let called_ns = rt::monotonic_ns();
         let child = cmd
             .spawn()
             .with_context(|| format!("starting {} ({})", self.spec.name, self.path.display()))?;
+        let spawned_ns = rt::monotonic_ns();
+        let pid = child.id() as i32;
         self.child = Some(child);
         self.state = ProcState::Running;
         self.started = Instant::now();
         self.held = false;
-        // The estimator has no stream of its own to wait for: it serves from its start.
-        self.data_since = (self.spec.name == "estimator").then_some(self.started);
-        if self.data_since.is_some() {
-            self.data_flowing(self.started);
+        self.data_since = None;
+        match self.restarting() {
+            Some(e) => {
+                e.next_pid = pid;
+                e.restart.get_or_insert_default().spawned_ms = Timeline::ms(e.seen_ns, spawned_ns);
+            }
+            None => {
+                self.first_spawn_ns = called_ns;
+                self.first_start.spawned_ms = Timeline::ms(called_ns, spawned_ns);
+            }
         }
         Ok(())
     }
 
-    /// The current process's data started to flow at `t`.
-    fn data_flowing(&mut self, t: Instant) {
+    /// The exit record of the process the current one replaced, if it is a restart.
+    fn restarting(&mut self) -> Option<&mut ExitRecord> {
+        self.exits.last_mut().filter(|e| e.restarted)
+    }
+
+    /// The current process's start-up report arrived.
+    fn started_up(&mut self, r: &BoardStartup) {
+        let pid = self.pid();
+        match self.exits.last_mut() {
+            Some(e) if e.restarted && e.next_pid == pid => {
+                let zero = e.seen_ns;
+                e.restart.get_or_insert_default().board(zero, r);
+            }
+            Some(_) => {}
+            None => self.first_start.board(self.first_spawn_ns, r),
+        }
+    }
+
+    /// The current process's data started to flow at `t` (`t_ns` on the monotonic clock).
+    fn data_flowing(&mut self, t: Instant, t_ns: u64) {
         self.data_since = Some(t);
-        if let (Some(at), Some(e)) = (self.exited_at, self.exits.last_mut())
-            && e.restarted
-            && e.back_ms.is_none()
-        {
-            e.back_ms = Some(t.duration_since(at).as_secs_f64() * 1e3);
+        match self.exits.last_mut() {
+            Some(e) if e.restarted && e.back_ms.is_none() => {
+                e.back_ms = Timeline::ms(e.seen_ns, t_ns);
+                e.restart.get_or_insert_default().seen_ms = e.back_ms;
+            }
+            Some(_) => {}
+            None => self.first_start.seen_ms = Timeline::ms(self.first_spawn_ns, t_ns),
         }
     }
 
@@ -451,7 +569,6 @@ impl Proc {
             } else {
                 0
             },
-            up_for: self.started.elapsed(),
             data_since: self.data_since,
             stall_policy: self.spec.stall_ms > 0,
         }
@@ -680,10 +797,11 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunOutcome> {
             started: Instant::now(),
             stalls: 0,
             streak: 0,
-            exited_at: None,
             data_since: None,
             held: false,
             injected_budget: 0,
+            first_spawn_ns: 0,
+            first_start: Timeline::default(),
         });
     }
     // The fault plan: between 1 s in and 1 s before the end.
@@ -749,6 +867,10 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunOutcome> {
         .subscriber_builder()
         .create()
         .map_err(|e| anyhow::anyhow!("friction subscriber: {e:?}"))?;
+    let startup_sub = ipc::startup(&node)?
+        .subscriber_builder()
+        .create()
+        .map_err(|e| anyhow::anyhow!("start-up subscriber: {e:?}"))?;
 
     // The set-up the boards read.
     let dir = std::env::temp_dir().join(format!("afs-{prefix}-{}", std::process::id()));
@@ -807,6 +929,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunOutcome> {
             stats: &stats_sub,
             friction: &friction_sub,
             status: &status_pub,
+            startup: &startup_sub,
         },
         &mut recorder,
         injector.as_mut(),
@@ -830,10 +953,20 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunOutcome> {
         Some(r) => Some(r.finish()?),
         None => None,
     };
-    let chaos_run = injector.map(|inj| ChaosRun {
-        planned: inj.plan().len(),
-        records: inj.records().to_vec(),
-        bad_sent: inj.bad_samples(),
+    let chaos_run = injector.map(|inj| {
+        let mut records = inj.records().to_vec();
+        for r in records.iter_mut().filter(|r| r.pid != 0) {
+            r.restart = procs
+                .iter()
+                .flat_map(|p| &p.exits)
+                .find(|e| e.pid == r.pid)
+                .and_then(|e| e.restart);
+        }
+        ChaosRun {
+            planned: inj.plan().len(),
+            records,
+            bad_sent: inj.bad_samples(),
+        }
     });
     drop((
         plant_sub,
@@ -842,6 +975,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunOutcome> {
         stats_sub,
         friction_sub,
         status_pub,
+        startup_sub,
         world,
     ));
     drop(node);
@@ -983,6 +1117,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunOutcome> {
             "restarts": p.restarts,
             "stalls_killed": p.stalls,
             "gave_up": p.state == ProcState::Failed,
+            "first_start": p.first_start,
             "exits": p.exits,
         })).collect::<Vec<_>>(),
         "record": record_summary,
@@ -1155,6 +1290,7 @@ struct Ports<'a> {
     stats: &'a iceoryx2::port::subscriber::Subscriber<Svc, LoopStats, ()>,
     friction: &'a iceoryx2::port::subscriber::Subscriber<Svc, FrictionReport, ()>,
     status: &'a iceoryx2::port::publisher::Publisher<Svc, SupervisorStatus, ()>,
+    startup: &'a iceoryx2::port::subscriber::Subscriber<Svc, BoardStartup, ()>,
 }
 
 struct Supervised {
@@ -1231,7 +1367,7 @@ fn supervise(
                 && sv.data_since.is_none()
                 && sv.state == ProcState::Running
             {
-                sv.data_flowing(last_plant_at);
+                sv.data_flowing(last_plant_at, rt::monotonic_ns());
             }
             if out.joiner.is_repeat(&p) {
                 continue;
@@ -1267,11 +1403,24 @@ fn supervise(
                         .iter_mut()
                         .find(|q| q.spec.name == "sensor" && q.state == ProcState::Running)
                 {
-                    sn.data_flowing(last_wrench_at);
+                    sn.data_flowing(last_wrench_at, rt::monotonic_ns());
                 }
             }
             if let Some(r) = recorder.as_mut() {
                 r.push(Rec::Wrench(*s.payload()));
+            }
+        }
+        while let Ok(Some(s)) = ports.startup.receive() {
+            let r = *s.payload();
+            if let Some(p) = procs
+                .iter_mut()
+                .find(|p| p.state == ProcState::Running && p.pid() == r.pid)
+            {
+                p.started_up(&r);
+                // The estimator has no stream of its own: it serves once its ports are open.
+                if p.spec.name == "estimator" && p.data_since.is_none() {
+                    p.data_flowing(Instant::now(), rt::monotonic_ns());
+                }
             }
         }
         while let Ok(Some(s)) = ports.stats.receive() {
@@ -1337,42 +1486,54 @@ fn supervise(
             if p.state == ProcState::Running {
                 let exited = p.child.as_mut().and_then(|c| c.try_wait().ok().flatten());
                 if let Some(st) = exited {
+                    let seen_ns = rt::monotonic_ns();
+                    let pid = p.pid();
+                    let healthy = p.data_since.is_some_and(|t| t.elapsed() >= HEALTHY_AFTER);
                     p.child = None;
                     p.last_exit = Some(exit_code(&st));
-                    p.exited_at = Some(now);
                     p.data_since = None;
                     p.held = false;
                     let ok = st.code() == Some(0);
-                    if p.spec.name == "servo" && ok {
-                        servo_done = true;
-                        p.state = ProcState::Exited;
-                        p.exits.push(ExitRecord {
-                            at_s,
-                            status: describe(&st),
-                            restarted: false,
-                            back_ms: None,
-                        });
-                        continue;
-                    }
-                    let restart = match p.spec.restart {
-                        Restart::Always => true,
-                        Restart::OnFailure => !ok,
-                        Restart::Never => false,
-                    } && p.restarts < p.spec.max_restarts + p.injected_budget;
-                    p.exits.push(ExitRecord {
+                    let servo_finished = p.spec.name == "servo" && ok;
+                    let restart = !servo_finished
+                        && match p.spec.restart {
+                            Restart::Always => true,
+                            Restart::OnFailure => !ok,
+                            Restart::Never => false,
+                        }
+                        && p.restarts < p.spec.max_restarts + p.injected_budget;
+                    let mut record = ExitRecord {
                         at_s,
+                        pid,
                         status: describe(&st),
                         restarted: restart,
                         back_ms: None,
-                    });
+                        restart: None,
+                        seen_ns,
+                        next_pid: 0,
+                    };
+                    if servo_finished {
+                        servo_done = true;
+                        p.state = ProcState::Exited;
+                        p.exits.push(record);
+                        continue;
+                    }
+                    // Its node is dead: remove its stale resources before anything replaces it.
+                    let _ = ipc::census(launch.prefix, true);
+                    let mut timeline = Timeline {
+                        cleaned_ms: Timeline::ms(seen_ns, rt::monotonic_ns()),
+                        ..Timeline::default()
+                    };
                     if restart {
-                        if p.started.elapsed() >= CRASH_LOOP_UPTIME {
+                        if healthy {
                             p.streak = 0;
                         }
                         let backoff = (p.spec.backoff_ms << p.streak.min(6)).min(2000);
+                        timeline.backoff_ms = Some(backoff as f64);
                         p.streak += 1;
                         p.state = ProcState::Waiting;
                         p.restart_at = Some(now + Duration::from_millis(backoff));
+                        record.restart = Some(timeline);
                     } else {
                         p.state = if ok {
                             ProcState::Exited
@@ -1385,8 +1546,7 @@ fn supervise(
                             describe(&st)
                         );
                     }
-                    // Its node is dead: remove its stale resources.
-                    let _ = ipc::census(launch.prefix, true);
+                    p.exits.push(record);
                     continue;
                 }
                 // Alive but silent?

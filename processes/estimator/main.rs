@@ -4,7 +4,7 @@
 //! afs-estimator --prefix afs --cpu 0
 //! ```
 
-use afs::board::{Common, stop_flag};
+use afs::board::{Common, Startup, stop_flag};
 use clap::Parser;
 use std::process::ExitCode;
 
@@ -17,15 +17,17 @@ struct Cli {
 }
 
 fn main() -> ExitCode {
+    let mut startup = Startup::new(afs_shared::msg::BOARD_ESTIMATOR, afs::rt::monotonic_ns());
     let cli = Cli::parse();
     let result = (|| {
         afs::ipc::check_prefix(&cli.common.prefix)?;
         let r = afs::rt::setup(cli.common.priority, false, cli.common.cpu);
+        startup.report.rt_ns = Startup::now();
         for w in &r.warnings {
             eprintln!("afs-estimator: warning: {w}");
         }
         let stop = stop_flag()?;
-        afs::estimator_board::run(&cli.common.prefix, &stop)
+        afs::estimator_board::run(&cli.common.prefix, startup, &stop)
     })();
     match result {
         Ok(_) => ExitCode::SUCCESS,

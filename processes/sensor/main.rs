@@ -24,6 +24,7 @@ struct Cli {
 }
 
 fn main() -> ExitCode {
+    let main_ns = afs::rt::monotonic_ns();
     let cli = Cli::parse();
     let result = (|| {
         let scenario = cli.common.scenario()?;
@@ -42,6 +43,7 @@ fn main() -> ExitCode {
                 seed: scenario.cfg.seed,
                 cpu: cli.common.cpu,
                 priority: cli.common.priority,
+                main_ns,
             },
             &stop,
         )

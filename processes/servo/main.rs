@@ -41,6 +41,7 @@ struct Cli {
 }
 
 fn main() -> ExitCode {
+    let main_ns = afs::rt::monotonic_ns();
     let cli = Cli::parse();
     let result = (|| {
         if !(cli.duration.is_finite() && cli.duration >= 0.0) {
@@ -66,6 +67,7 @@ fn main() -> ExitCode {
             estimator_attempts: cli.estimator_attempts,
             startup_timeout_s: cli.startup_timeout,
             histograms: cli.histograms.clone(),
+            main_ns,
         };
         run(&args, &stop)
     })();

@@ -45,6 +45,8 @@ pub mod service {
     pub const FRICTION: &str = "afs/estimator/friction";
     /// [`SupervisorStatus`](super::SupervisorStatus), 2 Hz.
     pub const SUPERVISOR: &str = "afs/supervisor/status";
+    /// [`BoardStartup`](super::BoardStartup), once per board process (boards → supervisor).
+    pub const STARTUP: &str = "afs/boards/startup";
     /// Blackboard of the world's state (key 0: [`WorldSnapshot`](super::WorldSnapshot)),
     /// owned by the supervisor, written by the servo.
     pub const WORLD: &str = "afs/plant/world";
@@ -968,6 +970,46 @@ pub struct WorldSnapshot {
     pub plant: PlantSample,
 }
 
+/// [`BoardStartup::board`] of the plant/servo board.
+pub const BOARD_SERVO: u32 = 0;
+/// [`BoardStartup::board`] of the force-sensor board.
+pub const BOARD_SENSOR: u32 = 1;
+/// [`BoardStartup::board`] of the estimator board.
+pub const BOARD_ESTIMATOR: u32 = 2;
+
+/// A board process's start-up, phase by phase, published once when its data first flows: what
+/// a (re)start spent its time on. Each field is the monotonic time (ns) the phase ended; 0 if
+/// the board has no such phase.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+#[type_name("afs::BoardStartup")]
+#[repr(C)]
+pub struct BoardStartup {
+    /// [`VERSION`].
+    pub version: u32,
+    /// Which board ([`BOARD_SERVO`], [`BOARD_SENSOR`], [`BOARD_ESTIMATOR`]).
+    pub board: u32,
+    /// Its process id.
+    pub pid: i32,
+    /// Reserved (0).
+    pub reserved: u32,
+    /// `main` entered (after the loader and the command line).
+    pub main_ns: u64,
+    /// The iceoryx2 node created (with the dead-node clean-up iceoryx2 does on creation).
+    pub node_ns: u64,
+    /// Its services opened and ports created.
+    pub ports_ns: u64,
+    /// The board's own preparation done: the sensor model and its tare, the servo's world
+    /// restored from the snapshot.
+    pub prepared_ns: u64,
+    /// First input in hand: the sensor's first world sample, the servo's first good force
+    /// sample.
+    pub input_ns: u64,
+    /// Real-time set-up done (memory locked, pinned, SCHED_FIFO).
+    pub rt_ns: u64,
+    /// First output published.
+    pub data_ns: u64,
+}
+
 /// One field of a message's byte layout.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct FieldLayout {
@@ -1131,6 +1173,11 @@ pub fn layouts() -> Vec<MessageLayout> {
             version: "u32", process_count: "u32", seq: "u64", publish_ns: "u64", pid: "i32",
             phase: "u32", scenario: "u8[32]", elapsed_s: "f64", duration_s: "f64",
             processes: "ProcessStatus[8]",
+        ]),
+        layout!(BoardStartup, "BoardStartup", [
+            version: "u32", board: "u32", pid: "i32", reserved: "u32", main_ns: "u64",
+            node_ns: "u64", ports_ns: "u64", prepared_ns: "u64", input_ns: "u64",
+            rt_ns: "u64", data_ns: "u64",
         ]),
         layout!(WorldSnapshot, "WorldSnapshot", [
             version: "u32", driver_leg: "u32", seq: "u64", time_s: "f64", q_rad: "f64[2]",
