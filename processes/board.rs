@@ -10,6 +10,7 @@ use afs_shared::sim::SimConfig;
 use anyhow::Result;
 use iceoryx2::node::Node;
 use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::update_connections::UpdateConnections;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -107,6 +108,14 @@ impl Startup {
                 .map_err(|e| anyhow::anyhow!("start-up publisher: {e:?}"))?,
         );
         Ok(())
+    }
+
+    /// Drops the connections to subscribers that died (the publisher sends once, so it would
+    /// otherwise keep them) and connects new ones; call it now and then.
+    pub fn update_connections(&self) {
+        if let Some(p) = self.publisher.as_ref() {
+            let _ = p.update_connections();
+        }
     }
 
     /// Sends the report (once; later calls do nothing). A failed send only loses the report.

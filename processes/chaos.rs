@@ -2,16 +2,19 @@
 //! [`afs_shared::faults::plan`].
 //!
 //! The [`Injector`] lives in the supervisor's loop (every 5 ms): it decides when a planned
-//! fault is due (simulated time, and the servo's mode for the mid-probe and mid-request
-//! kinds), returns the signals to send, publishes the bad force samples itself, and times the
-//! recovery (until the killed board's data flows again). One fault is in progress at a time; a
-//! fault waits until its board's data has flowed for [`MIN_UPTIME`].
+//! fault is due (simulated time), returns the signals to send, publishes the bad force samples
+//! itself, and times the recovery (until the killed board's data flows again). A fault that
+//! needs the servo to probe the tangent (mid-probe, mid-request) asks the servo for a probe
+//! when it is due, or takes the probe under way, and strikes when the strokes start. One fault
+//! is in progress at a time; a fault waits until its board's data has flowed for
+//! [`MIN_UPTIME`].
 
 use crate::ipc::Svc;
 use crate::rt;
 use crate::supervisor::Timeline;
 use afs_shared::faults::{BadSample, Board, FaultKind, PlannedFault};
 use afs_shared::msg::{WRENCH_INJECTED, WrenchSample};
+use afs_shared::servo::ServoMode;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::update_connections::UpdateConnections;
 use serde::Serialize;
@@ -21,7 +24,7 @@ use std::time::{Duration, Instant};
 /// supervisor's `HEALTHY_AFTER`, so an injected fault never looks like a crash loop).
 pub const MIN_UPTIME: Duration = Duration::from_millis(500);
 /// A frozen board with no stall policy gets SIGCONT after this long.
-const THAW_AFTER: Duration = Duration::from_secs(1);
+pub const THAW_AFTER: Duration = Duration::from_secs(1);
 /// Most simulated time to wait for the servo to probe (mid-probe and mid-request kinds).
 const PROBE_WAIT_S: f64 = 15.0;
 /// Most wall time to wait for a frozen estimator to receive the request.
@@ -31,10 +34,19 @@ const REQUEST_WAIT: Duration = Duration::from_secs(15);
 const REQUEST_KILL_DELAY: Duration = Duration::from_millis(50);
 /// Most wall time to wait for a faulted board to be back.
 const RECOVERY_WAIT: Duration = Duration::from_secs(20);
-/// Servo mode code while it dithers to probe the tangent.
-const MODE_PROBING: u32 = 2;
-/// Servo mode code while it waits for the estimator's answer.
-const MODE_AWAITING: u32 = 3;
+/// How often a due probe is asked for again while the servo tracks without starting it (a
+/// restarted servo has forgotten the request; the request lapses by itself once a probe
+/// starts).
+const ASK_AGAIN: Duration = Duration::from_millis(200);
+
+/// What the supervisor knows of the servo's controller, from its newest sample.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ServoView {
+    /// Its mode (None before the first sample, or an unknown code).
+    pub mode: Option<ServoMode>,
+    /// Estimations it has started.
+    pub started: u32,
+}
 
 /// What the supervisor knows of a board.
 #[derive(Debug, Clone, Copy, Default)]
@@ -56,6 +68,12 @@ pub enum Action {
     /// Exempt the board from the stall policy (the injector holds it frozen on purpose) or not;
     /// the supervisor lifts the hold when the process ends.
     Hold(Board, bool),
+    /// Ask the servo to estimate the tangent (stop, probe), unless more than `started_before`
+    /// estimations have started by the time it can.
+    AskProbe {
+        /// The servo's estimations started, as last seen.
+        started_before: u32,
+    },
 }
 
 /// One fault as it went.
@@ -71,8 +89,10 @@ pub struct FaultRecord {
     pub wall_s: f64,
     /// The process signalled.
     pub pid: i32,
-    /// The servo's mode at the injection (2: probing, 3: awaiting the estimate).
-    pub servo_mode: u32,
+    /// The servo's mode at the injection.
+    pub servo_mode: Option<ServoMode>,
+    /// Probes the injector asked the servo for, for this fault.
+    pub probes_asked: u32,
     /// A frozen board: time until the supervisor's stall policy killed it (ms).
     pub detected_ms: Option<f64>,
     /// Time from the fault to the board's data flowing again (ms).
@@ -105,9 +125,11 @@ pub struct BadCounts {
 
 enum Phase {
     Idle,
-    /// Waiting for the servo to probe (since this simulated time).
+    /// Waiting for the servo to probe (since this simulated time), having asked for a probe
+    /// at `asked` (None: not yet).
     WaitProbe {
         since_s: f64,
+        asked: Option<Instant>,
     },
     /// Estimator frozen at the probe's start; waiting for the request.
     FrozenForRequest {
@@ -142,6 +164,8 @@ pub struct Injector {
     bad: BadCounts,
     /// Probes the servo cut short while the pending fault waited for one; noted in its record.
     probes_cut_short: u32,
+    /// Probes asked for the pending fault.
+    probes_asked: u32,
 }
 
 impl Injector {
@@ -156,6 +180,7 @@ impl Injector {
             records: Vec::new(),
             bad: BadCounts::default(),
             probes_cut_short: 0,
+            probes_asked: 0,
         }
     }
 
@@ -192,12 +217,12 @@ impl Injector {
             .count() as u32
     }
 
-    /// One supervisor iteration: simulated time, the servo's newest mode, the boards
-    /// (servo, sensor, estimator), the newest genuine force sample. Returns what to signal.
+    /// One supervisor iteration: simulated time, the servo's controller, the boards (servo,
+    /// sensor, estimator), the newest genuine force sample. Returns what to do.
     pub fn step(
         &mut self,
         sim_s: f64,
-        servo_mode: u32,
+        servo: ServoView,
         boards: &[BoardView; 3],
         genuine: Option<&WrenchSample>,
     ) -> Vec<Action> {
@@ -206,6 +231,13 @@ impl Injector {
         // servo's) as soon as iceoryx2 has cleaned them, not at the next burst.
         let _ = self.publisher.update_connections();
         let view = |b: Board| boards[b as usize];
+        let ready = |b: Board| {
+            let v = view(b);
+            v.pid != 0
+                && v.data_since
+                    .is_some_and(|t| now.duration_since(t) >= MIN_UPTIME)
+        };
+        let mode = servo.mode;
         let mut out = Vec::new();
         let phase = std::mem::replace(&mut self.phase, Phase::Idle);
         self.phase = match phase {
@@ -213,23 +245,14 @@ impl Injector {
                 let Some(f) = self.plan.get(self.next).copied() else {
                     return out;
                 };
-                if sim_s < f.at_s {
+                if sim_s < f.at_s || f.kind.target().is_some_and(|b| !ready(b)) {
                     return out;
                 }
-                if let Some(b) = f.kind.target() {
-                    let v = view(b);
-                    if v.pid == 0
-                        || v.data_since
-                            .is_none_or(|t| now.duration_since(t) < MIN_UPTIME)
-                    {
-                        return out;
-                    }
-                }
                 match f.kind {
-                    FaultKind::Kill(b) => self.kill(b, sim_s, servo_mode, boards, &mut out, ""),
+                    FaultKind::Kill(b) => self.kill(b, sim_s, mode, boards, &mut out, ""),
                     FaultKind::Freeze(b) => {
                         let v = view(b);
-                        self.record(sim_s, servo_mode, v.pid, "");
+                        self.record(sim_s, mode, v.pid, "");
                         out.push(Action::Signal(b, libc::SIGSTOP));
                         Phase::Frozen {
                             board: b,
@@ -238,11 +261,14 @@ impl Injector {
                         }
                     }
                     FaultKind::KillMidProbe(_) | FaultKind::KillEstimatorMidRequest => {
-                        Phase::WaitProbe { since_s: sim_s }
+                        Phase::WaitProbe {
+                            since_s: sim_s,
+                            asked: None,
+                        }
                     }
                     FaultKind::BadSamples => match genuine {
                         Some(g) => {
-                            self.record(sim_s, servo_mode, 0, "");
+                            self.record(sim_s, mode, 0, "");
                             self.burst(g);
                             self.next += 1;
                             Phase::Idle
@@ -251,23 +277,18 @@ impl Injector {
                     },
                 }
             }
-            Phase::WaitProbe { since_s } => {
+            Phase::WaitProbe { since_s, asked } => {
                 let f = self.plan[self.next];
-                let probing = servo_mode == MODE_PROBING;
+                let probing = mode == Some(ServoMode::Probing);
                 let late = sim_s - since_s > PROBE_WAIT_S;
                 let note = if probing {
                     ""
                 } else {
                     "the servo did not probe in time; injected anyway"
                 };
-                let waiting = Phase::WaitProbe { since_s };
                 match f.kind {
-                    FaultKind::KillMidProbe(b) if probing || late => {
-                        if view(b).pid == 0 {
-                            waiting
-                        } else {
-                            self.kill(b, sim_s, servo_mode, boards, &mut out, note)
-                        }
+                    FaultKind::KillMidProbe(b) if (probing || late) && view(b).pid != 0 => {
+                        self.kill(b, sim_s, mode, boards, &mut out, note)
                     }
                     FaultKind::KillEstimatorMidRequest if probing => {
                         out.push(Action::Hold(Board::Estimator, true));
@@ -275,30 +296,47 @@ impl Injector {
                         Phase::FrozenForRequest { since: now }
                     }
                     FaultKind::KillEstimatorMidRequest if late => {
-                        self.kill(Board::Estimator, sim_s, servo_mode, boards, &mut out, note)
+                        self.kill(Board::Estimator, sim_s, mode, boards, &mut out, note)
                     }
-                    _ => waiting,
+                    // Tracking: ask for a probe (again, if a restarted servo forgot it).
+                    _ if mode == Some(ServoMode::Track)
+                        && view(Board::Servo).pid != 0
+                        && asked.is_none_or(|t| now.duration_since(t) >= ASK_AGAIN) =>
+                    {
+                        out.push(Action::AskProbe {
+                            started_before: servo.started,
+                        });
+                        self.probes_asked += 1;
+                        Phase::WaitProbe {
+                            since_s,
+                            asked: Some(now),
+                        }
+                    }
+                    // Stopping, settling, resuming or restarting: the probe comes.
+                    _ => Phase::WaitProbe { since_s, asked },
                 }
             }
             Phase::FrozenForRequest { since } => {
-                if servo_mode == MODE_AWAITING {
+                if mode == Some(ServoMode::AwaitingEstimate) {
                     Phase::KillAt {
                         at: now + REQUEST_KILL_DELAY,
                     }
-                } else if servo_mode != MODE_PROBING {
+                } else if mode != Some(ServoMode::Probing) {
                     // The servo cut the probe short (its safe state: a late force sample) and
-                    // will send no request for it: let the estimator go and wait for the next
-                    // probe.
+                    // will send no request for it: let the estimator go and ask for another.
                     out.push(Action::Signal(Board::Estimator, libc::SIGCONT));
                     out.push(Action::Hold(Board::Estimator, false));
                     self.probes_cut_short += 1;
-                    Phase::WaitProbe { since_s: sim_s }
+                    Phase::WaitProbe {
+                        since_s: sim_s,
+                        asked: None,
+                    }
                 } else if now.duration_since(since) > REQUEST_WAIT {
                     out.push(Action::Signal(Board::Estimator, libc::SIGCONT));
                     out.push(Action::Hold(Board::Estimator, false));
                     self.record(
                         sim_s,
-                        servo_mode,
+                        mode,
                         view(Board::Estimator).pid,
                         "no request came while the estimator was frozen; thawed",
                     );
@@ -314,7 +352,7 @@ impl Injector {
             // Still held when killed: the supervisor lifts the hold when it reaps the process,
             // so its stall policy does not count this kill as a stall of its own.
             Phase::KillAt { at } if now >= at => {
-                self.kill(Board::Estimator, sim_s, servo_mode, boards, &mut out, "")
+                self.kill(Board::Estimator, sim_s, mode, boards, &mut out, "")
             }
             p @ Phase::KillAt { .. } => p,
             Phase::Frozen {
@@ -378,7 +416,7 @@ impl Injector {
         out
     }
 
-    fn record(&mut self, sim_s: f64, servo_mode: u32, pid: i32, note: &str) {
+    fn record(&mut self, sim_s: f64, servo_mode: Option<ServoMode>, pid: i32, note: &str) {
         let f = self.plan[self.next];
         let note = match std::mem::take(&mut self.probes_cut_short) {
             0 => note.to_string(),
@@ -398,6 +436,7 @@ impl Injector {
             wall_s: self.t0.elapsed().as_secs_f64(),
             pid,
             servo_mode,
+            probes_asked: std::mem::take(&mut self.probes_asked),
             detected_ms: None,
             back_ms: None,
             thawed: false,
@@ -410,7 +449,7 @@ impl Injector {
         &mut self,
         b: Board,
         sim_s: f64,
-        servo_mode: u32,
+        servo_mode: Option<ServoMode>,
         boards: &[BoardView; 3],
         out: &mut Vec<Action>,
         note: &str,
@@ -477,10 +516,21 @@ mod tests {
             .collect()
     }
 
-    /// A probe cut short while the estimator is frozen for it: the estimator is let go at once
-    /// and frozen again at the next probe, whose request is then killed in flight.
+    fn asked(actions: &[Action]) -> Vec<u32> {
+        actions
+            .iter()
+            .filter_map(|a| match a {
+                Action::AskProbe { started_before } => Some(*started_before),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// A due mid-request fault asks the tracking servo for a probe (once, not again while it
+    /// stops), freezes the estimator when the strokes start; a probe cut short lets the
+    /// estimator go and asks for another, whose request is then killed in flight.
     #[test]
-    fn a_probe_cut_short_rearms_the_mid_request_kill() {
+    fn a_due_probe_fault_asks_for_a_probe_and_rearms_when_it_is_cut_short() {
         let prefix = format!("ut_chaos_{}", std::process::id());
         let node = ipc::node(&prefix, "injector_test").unwrap();
         let service = ipc::wrench(&node).unwrap();
@@ -496,32 +546,44 @@ mod tests {
             stall_policy: true,
         };
         let boards = [up; 3];
-        let (track, probing, awaiting, resuming) = (0, MODE_PROBING, MODE_AWAITING, 4);
-        assert!(inj.step(0.5, track, &boards, None).is_empty());
-        assert!(inj.step(1.0, track, &boards, None).is_empty());
+        let servo = |mode, started| ServoView {
+            mode: Some(mode),
+            started,
+        };
+        use ServoMode::*;
+        assert!(inj.step(0.5, servo(Track, 0), &boards, None).is_empty());
+        assert!(inj.step(1.0, servo(Track, 0), &boards, None).is_empty());
+        assert_eq!(asked(&inj.step(1.01, servo(Track, 0), &boards, None)), [0]);
+        // Not again at once, nor while the servo stops.
+        assert!(inj.step(1.02, servo(Track, 0), &boards, None).is_empty());
+        assert!(inj.step(1.1, servo(Stopping, 1), &boards, None).is_empty());
         assert_eq!(
-            signals(&inj.step(1.1, probing, &boards, None)),
+            signals(&inj.step(1.5, servo(Probing, 1), &boards, None)),
             [libc::SIGSTOP]
         );
-        assert!(inj.step(1.2, probing, &boards, None).is_empty());
+        assert!(inj.step(1.6, servo(Probing, 1), &boards, None).is_empty());
         // The servo's safe state aborts the probe: no request will come.
-        let thaw = inj.step(1.3, resuming, &boards, None);
+        let thaw = inj.step(1.7, servo(Resuming, 1), &boards, None);
         assert_eq!(signals(&thaw), [libc::SIGCONT]);
         assert!(thaw.contains(&Action::Hold(Board::Estimator, false)));
         assert!(inj.records().is_empty());
-        assert!(inj.step(2.0, track, &boards, None).is_empty());
+        assert_eq!(asked(&inj.step(2.0, servo(Track, 1), &boards, None)), [1]);
         assert_eq!(
-            signals(&inj.step(3.0, probing, &boards, None)),
+            signals(&inj.step(3.0, servo(Probing, 2), &boards, None)),
             [libc::SIGSTOP]
         );
-        assert!(inj.step(4.0, awaiting, &boards, None).is_empty());
+        assert!(
+            inj.step(4.0, servo(AwaitingEstimate, 2), &boards, None)
+                .is_empty()
+        );
         std::thread::sleep(REQUEST_KILL_DELAY);
         assert_eq!(
-            signals(&inj.step(4.1, awaiting, &boards, None)),
+            signals(&inj.step(4.1, servo(AwaitingEstimate, 2), &boards, None)),
             [libc::SIGKILL]
         );
         let r = &inj.records()[0];
-        assert_eq!(r.servo_mode, MODE_AWAITING);
+        assert_eq!(r.servo_mode, Some(AwaitingEstimate));
+        assert_eq!(r.probes_asked, 2);
         assert!(!r.thawed);
         assert!(r.note.contains("cut 1 probe(s) short"), "{}", r.note);
         drop((inj, service, node));

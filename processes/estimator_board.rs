@@ -82,6 +82,7 @@ pub fn run(prefix: &str, mut startup: Startup, stop: &AtomicBool) -> Result<Esti
         // compares a counter.
         let _ = tangent_server.update_connections();
         let _ = rotation_server.update_connections();
+        startup.update_connections();
         while let Ok(Some(s)) = servo_sub.receive() {
             if s.payload().version == msg::VERSION {
                 ident.push(&ident_tick(s.payload()));

@@ -7,8 +7,8 @@
 
 use afs_shared::msg::{
     BoardStartup, FrictionReport, LoopStats, PlantSample, RotationRequestHeader, RotationResponse,
-    RotationSample, ServoSample, SupervisorStatus, TangentRequestHeader, TangentResponse,
-    WorldSnapshot, WrenchSample, service,
+    RotationSample, ServoCommand, ServoSample, SupervisorStatus, TangentRequestHeader,
+    TangentResponse, WorldSnapshot, WrenchSample, service,
 };
 use afs_shared::tangent::ProbeSample;
 use anyhow::{Context, Result, bail};
@@ -165,6 +165,21 @@ pub fn supervisor(
     node: &Node<Svc>,
 ) -> Result<publish_subscribe::PortFactory<Svc, SupervisorStatus, ()>> {
     status_stream(node, service::SUPERVISOR)
+}
+
+/// The servo's command stream: no history (a restarted servo must not act on an old
+/// command), a few publishers (the supervisor, clients).
+pub fn command(node: &Node<Svc>) -> Result<publish_subscribe::PortFactory<Svc, ServoCommand, ()>> {
+    node.service_builder(&name(service::COMMAND)?)
+        .publish_subscribe::<ServoCommand>()
+        .enable_safe_overflow(true)
+        .history_size(0)
+        .subscriber_max_buffer_size(16)
+        .max_subscribers(4)
+        .max_publishers(4)
+        .max_nodes(12)
+        .open_or_create()
+        .map_err(|e| anyhow::anyhow!("opening service '{}': {e:?}", service::COMMAND))
 }
 
 /// The boards' start-up reports: one publisher per board process (and room for dead ones not

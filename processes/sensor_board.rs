@@ -120,6 +120,11 @@ pub fn run(args: &SensorArgs, stop: &AtomicBool) -> Result<SensorSummary> {
             }
             seq += 1;
         }
+        if seq % 1024 == 512 {
+            // About every 0.15 s: the start-up report's publisher sends once, so it drops
+            // the connections of subscribers that died only when asked.
+            startup.update_connections();
+        }
         deadline += period_ns;
         let now2 = rt::monotonic_ns();
         if now2 > deadline + 100 * period_ns {

@@ -32,6 +32,9 @@ use std::mem::MaybeUninit;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
+/// Default time the estimator has to answer before a request is re-sent (s).
+pub const ESTIMATOR_TIMEOUT_S: f64 = 1.0;
+
 /// How the servo runs.
 #[derive(Debug, Clone)]
 pub struct ServoArgs {
@@ -283,6 +286,11 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
         .allocation_strategy(AllocationStrategy::Static)
         .create()
         .map_err(|e| anyhow::anyhow!("tangent client: {e:?}"))?;
+    let command_sub = ipc::command(&node)?
+        .subscriber_builder()
+        .buffer_size(16)
+        .create()
+        .map_err(|e| anyhow::anyhow!("command subscriber: {e:?}"))?;
     let world = ipc::open_world(&node);
     if world.is_none() {
         eprintln!(
@@ -355,10 +363,7 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
     // Ticks 1..=tick_limit are the scenario's (0 is the world's first sample): the same count
     // the lockstep runs, whatever restarts happen in between.
     let tick_limit = (duration / dt).round() as u64;
-    let tangent0 = snapshot.map_or(
-        cfg.surface.tangent_angle_at(cfg.start_u_m) + cfg.tangent_error_rad,
-        |s| s.tangent_angle_rad,
-    );
+    let tangent0 = cfg.surface.tangent_angle_at(cfg.start_u_m) + cfg.tangent_error_rad;
 
     // Publish the world until the sensor answers.
     let mut gate = SampleGate::new(GateParams {
@@ -412,31 +417,44 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
     let mut wrench0 = first.wrench();
     wrench0.force -= first.tare().force;
     wrench0.torque -= first.tare().torque;
-    let (q, _) = plant.joints();
+    // Built as the first servo was (same start, so the same gains and stiffness), then given
+    // its predecessor's state: a restarted servo carries on with the controller, not only
+    // with the world.
     let mut servo = ServoCore::new(
         cfg.servo,
         cfg.plant.arm,
         cfg.plant.elbow,
-        q,
+        q0,
         wrench0,
         tangent0,
     )
     .map_err(anyhow::Error::msg)?;
-    servo.set_tare(first.tare());
     let mut driver = scenario.driver();
     if let Some(s) = snapshot {
         driver.resume(
             s.time_s,
-            s.velocity_m_per_s,
-            s.a_omega_m_per_s,
             DriverMemo {
                 leg: (s.driver_leg != u32::MAX).then_some(s.driver_leg),
                 leg_start_s: s.driver_leg_start[0],
                 leg_start_u: s.driver_leg_start[1],
             },
-            &mut servo,
         );
+        if let Err(e) = servo.restore(&s.controller) {
+            // The world carries on; the controller starts afresh from it.
+            eprintln!("afs-servo: warning: {e}; the controller starts afresh");
+            let (q, _) = plant.joints();
+            servo = ServoCore::new(
+                cfg.servo,
+                cfg.plant.arm,
+                cfg.plant.elbow,
+                q,
+                wrench0,
+                tangent0,
+            )
+            .map_err(anyhow::Error::msg)?;
+        }
     }
+    servo.set_tare(first.tare());
     let mut link = EstimatorLink {
         client,
         state: Link::Idle,
@@ -466,6 +484,9 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
         ..Default::default()
     };
     let mut safe_reason = 0u32;
+    // A tangent estimate asked for, until the servo can start it: the number of estimations
+    // started when it was sent (it lapses once more have started).
+    let mut estimate_wanted: Option<u32> = None;
     let mut last_tare = first.tare();
     let start_ns = rt::monotonic_ns() + period_ns;
     let mut deadline = start_ns;
@@ -519,6 +540,25 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
         {
             break;
         }
+        while let Ok(Some(c)) = command_sub.receive() {
+            let c = *c.payload();
+            stats.commands += 1;
+            if c.version == msg::VERSION && c.command == msg::COMMAND_ESTIMATE_TANGENT {
+                estimate_wanted = Some(c.started_before);
+            } else {
+                stats.bad_commands += 1;
+            }
+        }
+        if let Some(before) = estimate_wanted {
+            let started = u32::try_from(servo.counters().started).unwrap_or(u32::MAX);
+            if started > before {
+                estimate_wanted = None;
+            } else if servo.mode() == ServoMode::Track {
+                // The lockstep reference replays this at the same tick (`Replay::requested`).
+                servo.request_tangent_estimate();
+                estimate_wanted = None;
+            }
+        }
         let tau = servo.step(&input, dt);
         plant.step(tau, dt);
         if servo.is_safe() {
@@ -566,6 +606,7 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
             // this only reads the service's port list; with one it maps or unmaps a segment,
             // as the next send would.
             let _ = link.client.update_connections();
+            startup.update_connections();
         }
         seq += 1;
         deadline += period_ns;
@@ -592,9 +633,6 @@ fn snapshot_of(
     let st = plant.state();
     let memo = driver.memo();
     let face = |f: usize| u64::try_from(f).unwrap_or(u64::MAX);
-    // The velocity and Aω to restore are the ones in force outside any estimation or safe
-    // state: what the servo would go back to.
-    let d = servo.diag();
     WorldSnapshot {
         version: msg::VERSION,
         driver_leg: memo.leg.unwrap_or(u32::MAX),
@@ -604,10 +642,8 @@ fn snapshot_of(
         qd_rad_per_s: st.qd,
         friction_face: [face(st.friction[0].0), face(st.friction[1].0)],
         friction_deflection_m: [st.friction[0].1, st.friction[1].1],
-        tangent_angle_rad: d.tangent_angle_rad,
-        a_omega_m_per_s: servo.resume_a_omega(),
-        velocity_m_per_s: servo.resume_velocity(),
         driver_leg_start: [memo.leg_start_s, memo.leg_start_u],
+        controller: servo.state(),
         plant: plant_sample,
     }
 }

@@ -7,19 +7,20 @@
 //! Children get SIGTERM if the supervisor dies (`PR_SET_PDEATHSIG`); a supervisor that finds a
 //! dead stack's resources under its prefix removes them before starting.
 
-use crate::chaos::{Action, BoardView, Injector};
+use crate::chaos::{Action, BoardView, Injector, ServoView};
 use crate::ipc::{self, Svc};
 use crate::record::{Rec, RecordSummary, Recorder};
 use crate::rt;
 use afs_shared::faults::{self, Board, FaultFigures, FaultKind, FaultMonitor};
 use afs_shared::msg::{
     self, BoardStartup, FRICTION_LAW_VALID, FRICTION_MU_VALID, FrictionReport, LoopStats,
-    PlantSample, ProcessStatus, ServoSample, SupervisorStatus, WRENCH_INJECTED, WrenchSample,
-    fixed_str,
+    PlantSample, ProcessStatus, ServoCommand, ServoSample, SupervisorStatus, WRENCH_INJECTED,
+    WrenchSample, fixed_str,
 };
 use afs_shared::scenario::{self, Agreement, Scenario, ScenarioReport};
 use afs_shared::sim::SimConfig;
 use anyhow::{Context, Result, bail};
+use iceoryx2::port::update_connections::UpdateConnections;
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 use std::collections::VecDeque;
@@ -197,7 +198,7 @@ pub struct ChaosOptions {
     pub faults: usize,
     /// Seed of the plan.
     pub seed: u64,
-    /// Kinds to draw from.
+    /// Kinds to draw from (empty: every kind the scenario allows).
     pub kinds: Vec<FaultKind>,
     /// Take the kinds in turn instead of at random.
     pub in_turn: bool,
@@ -735,6 +736,7 @@ pub fn loop_stats_json(s: &LoopStats) -> Value {
         "safe_ticks": s.safe_ticks,
         "estimator": {"requests": s.requests, "retries": s.retries, "answers": s.answers},
         "publish_failures": s.publish_failures,
+        "commands": {"received": s.commands, "refused": s.bad_commands},
     })
 }
 
@@ -806,24 +808,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunOutcome> {
     }
     // The fault plan: between 1 s in and 1 s before the end.
     let plan = match &opts.chaos {
-        Some(c) => {
-            if c.faults > MAX_FAULTS {
-                bail!(
-                    "{} faults are too many: at most {MAX_FAULTS} (one per {} ms of a day's run)",
-                    c.faults,
-                    86_400_000 / MAX_FAULTS
-                );
-            }
-            if duration < 3.0 {
-                bail!(
-                    "a chaos run needs at least 3 simulated seconds (faults fall between 1 s in and 1 s before the end); got {duration} s"
-                );
-            }
-            Some(
-                faults::plan(c.seed, c.faults, 1.0, duration - 1.0, &c.kinds, c.in_turn)
-                    .map_err(anyhow::Error::msg)?,
-            )
-        }
+        Some(c) => Some(chaos_plan(c, &stack, &scenario, duration)?),
         None => None,
     };
 
@@ -871,6 +856,10 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunOutcome> {
         .subscriber_builder()
         .create()
         .map_err(|e| anyhow::anyhow!("start-up subscriber: {e:?}"))?;
+    let command_pub = ipc::command(&node)?
+        .publisher_builder()
+        .create()
+        .map_err(|e| anyhow::anyhow!("command publisher: {e:?}"))?;
 
     // The set-up the boards read.
     let dir = std::env::temp_dir().join(format!("afs-{prefix}-{}", std::process::id()));
@@ -930,6 +919,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunOutcome> {
             friction: &friction_sub,
             status: &status_pub,
             startup: &startup_sub,
+            command: &command_pub,
         },
         &mut recorder,
         injector.as_mut(),
@@ -976,6 +966,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunOutcome> {
         friction_sub,
         status_pub,
         startup_sub,
+        command_pub,
         world,
     ));
     drop(node);
@@ -986,7 +977,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunOutcome> {
     // The lockstep reference, replaying the ticks the servo had no usable force data
     // (≈ 300× real time).
     let reference: ScenarioReport =
-        scenario::run_lockstep_replay(&scenario, duration, run.monitor.force_invalid())
+        scenario::run_lockstep_replay(&scenario, duration, &run.monitor.replay())
             .map_err(anyhow::Error::msg)?;
     let stack_report = run.monitor.report();
     let agreement: Agreement = scenario::compare(&stack_report, &reference);
@@ -1015,13 +1006,12 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunOutcome> {
         },
     ];
     let finished = run.finished;
-    // A restarted servo resumes the world but not its controller's inner state (filters, tuner
-    // windows, a probe run in progress): the lockstep cannot replay that, so the agreement is
-    // then reported but not a check.
+    // A restarted servo resumes the world and its controller, and the lockstep reference goes
+    // through the same restarts at the same ticks (with the same probe runs started again).
     let servo_restarted = procs
         .iter()
         .any(|p| p.spec.name == "servo" && p.restarts > 0);
-    if finished && !servo_restarted {
+    if finished {
         checks.push(Check {
             name: "figures within tolerance of the lockstep reference".into(),
             value: agreement.figures.iter().filter(|f| !f.agrees).count() as f64,
@@ -1076,6 +1066,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunOutcome> {
         chaos_checks(
             c,
             &fault_figures,
+            scenario.cfg.servo.hybrid.preload_n,
             &run.steady,
             run.stats.as_ref(),
             servo_restarted,
@@ -1132,6 +1123,91 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunOutcome> {
     Ok(RunOutcome { report, passed })
 }
 
+/// The fault plan of a chaos run: the kinds (the mid-probe and mid-request ones only where the
+/// scenario tracks a surface), each kind's span from the stack's policies and the scenario's
+/// probe, between 1 s in and 1 s before the end (the run's, or the scenario's own end in its
+/// lockstep run if that comes first).
+fn chaos_plan(
+    c: &ChaosOptions,
+    stack: &StackFile,
+    scenario: &Scenario,
+    duration: f64,
+) -> Result<Vec<faults::PlannedFault>> {
+    if c.faults > MAX_FAULTS {
+        bail!(
+            "{} faults are too many: at most {MAX_FAULTS} (one per {} ms of a day's run)",
+            c.faults,
+            86_400_000 / MAX_FAULTS
+        );
+    }
+    if duration < 3.0 {
+        bail!(
+            "a chaos run needs at least 3 simulated seconds (faults fall between 1 s in and 1 s before the end); got {duration} s"
+        );
+    }
+    let probes = scenario.cfg.servo.tracking.enabled;
+    let kinds: Vec<FaultKind> = if c.kinds.is_empty() {
+        FaultKind::ALL
+            .iter()
+            .map(|(_, k)| *k)
+            .filter(|k| probes || !k.needs_probe())
+            .collect()
+    } else {
+        if let Some(k) = c.kinds.iter().find(|k| k.needs_probe() && !probes) {
+            bail!(
+                "{} needs a scenario that probes the tangent (surface-tracking, corner); {} does not",
+                k.name(),
+                stack.scenario
+            );
+        }
+        c.kinds.clone()
+    };
+    let spec = |b: Board| stack.process.iter().find(|p| p.name == b.name());
+    let ms = |v: Option<u64>| v.unwrap_or(0) as f64 * 1e-3;
+    let per_board = |f: fn(&ProcessSpec) -> u64| {
+        [Board::Servo, Board::Sensor, Board::Estimator].map(|b| ms(spec(b).map(f)))
+    };
+    let tangent = &scenario.cfg.servo.tangent;
+    let hybrid = &scenario.cfg.servo.hybrid;
+    let spans = faults::FaultSpans {
+        backoff_s: per_board(|p| p.backoff_ms),
+        stall_s: per_board(|p| p.stall_ms),
+        start_s: START_ALLOWANCE_S,
+        uptime_s: crate::chaos::MIN_UPTIME.as_secs_f64(),
+        // Braking from the tracking speed, the hold until the normal force is back at the
+        // preload (the probe's settle time), and margin.
+        probe_start_s: scenario::TRACKING_VELOCITY / hybrid.tangential_acceleration_m_per_s2
+            + tangent.settle_s
+            + 0.3,
+        probe_s: tangent.first_plan().duration(),
+        retry_s: crate::servo_board::ESTIMATOR_TIMEOUT_S + 0.5,
+        thaw_s: crate::chaos::THAW_AFTER.as_secs_f64(),
+        burst_s: 0.05,
+    };
+    // A traverse can end before the duration.
+    let end = match scenario.end_u_m {
+        Some(_) => scenario::run_lockstep(scenario, duration)
+            .map_err(anyhow::Error::msg)?
+            .duration_s
+            .min(duration),
+        None => duration,
+    };
+    faults::plan(
+        c.seed,
+        c.faults,
+        (1.0, end - 1.0),
+        &kinds,
+        c.in_turn,
+        &spans,
+        2.0 + (duration - end),
+    )
+    .map_err(|e| anyhow::anyhow!("{e} (a chaos run of {} s)", duration))
+}
+
+/// A board's start-up beyond its backoff, with margin, in a fault's span (s): restarts take
+/// 20–70 ms beyond the backoff (docs/reliability.md).
+const START_ALLOWANCE_S: f64 = 0.3;
+
 /// Most faults one chaos run takes.
 pub const MAX_FAULTS: usize = 10_000;
 
@@ -1146,6 +1222,7 @@ struct ChaosRun {
 fn chaos_checks(
     c: &ChaosRun,
     f: &FaultFigures,
+    preload_n: f64,
     steady: &[Option<Footprint>; 2],
     stats: Option<&LoopStats>,
     servo_restarted: bool,
@@ -1190,6 +1267,14 @@ fn chaos_checks(
         "<=",
         2.0,
     );
+    if servo_restarted {
+        check(
+            "largest true normal force / preload in the 0.5 s after a servo restart",
+            f.normal_force_max_after_servo_restart_n / preload_n,
+            "<=",
+            1.5,
+        );
+    }
     // Recovery times (ms) of the faults whose kind starts with `prefix`.
     let back = |prefix: &str| -> Vec<f64> {
         c.records
@@ -1291,6 +1376,7 @@ struct Ports<'a> {
     friction: &'a iceoryx2::port::subscriber::Subscriber<Svc, FrictionReport, ()>,
     status: &'a iceoryx2::port::publisher::Publisher<Svc, SupervisorStatus, ()>,
     startup: &'a iceoryx2::port::subscriber::Subscriber<Svc, BoardStartup, ()>,
+    command: &'a iceoryx2::port::publisher::Publisher<Svc, ServoCommand, ()>,
 }
 
 struct Supervised {
@@ -1349,7 +1435,8 @@ fn supervise(
     let mut last_wrench_at = Instant::now();
     let mut last_friction_at = Instant::now();
     let mut last_time_s = 0.0f64;
-    let mut servo_mode = 0u32;
+    let mut servo_view = ServoView::default();
+    let mut command_seq = 0u64;
     let mut genuine: Option<WrenchSample> = None;
     // Wall-clock limit: the simulated duration plus generous start-up and restart slack.
     let limit = Duration::from_secs_f64(duration * 1.5 + 30.0);
@@ -1368,6 +1455,12 @@ fn supervise(
                 && sv.state == ProcState::Running
             {
                 sv.data_flowing(last_plant_at, rt::monotonic_ns());
+                // A restarted servo's first sample is its predecessor's last tick again (from
+                // the snapshot it resumes): its own ticks start at the next one.
+                if sv.restarts > 0 {
+                    out.faults.servo_restarted_at(p.seq + 1);
+                    out.monitor.servo_restarted_at(p.seq + 1);
+                }
             }
             if out.joiner.is_repeat(&p) {
                 continue;
@@ -1380,7 +1473,10 @@ fn supervise(
         }
         while let Ok(Some(s)) = ports.servo.receive() {
             let v = *s.payload();
-            servo_mode = v.mode;
+            servo_view = ServoView {
+                mode: msg::servo_mode_from_code(v.mode),
+                started: v.estimations_started,
+            };
             if let Some(r) = recorder.as_mut() {
                 r.push(Rec::Servo(v));
             }
@@ -1437,6 +1533,12 @@ fn supervise(
             }
         }
 
+        // The supervisor's own publishers send rarely (status) or on demand (commands): drop
+        // their connections to subscribers that died (a killed servo's) as soon as iceoryx2
+        // has cleaned them; without a change this compares a counter.
+        let _ = ports.status.update_connections();
+        let _ = ports.command.update_connections();
+
         // Faults.
         if let Some(inj) = chaos.as_deref_mut() {
             let mut views = [BoardView::default(); 3];
@@ -1462,7 +1564,7 @@ fn supervise(
                     out.steady[slot] = Some(Footprint::now(launch.prefix, procs, t0));
                 }
             }
-            for a in inj.step(last_time_s, servo_mode, &views, genuine.as_ref()) {
+            for a in inj.step(last_time_s, servo_view, &views, genuine.as_ref()) {
                 match a {
                     Action::Signal(b, sig) => {
                         if let Some(p) = procs.iter().find(|p| p.spec.name == b.name()) {
@@ -1473,6 +1575,17 @@ fn supervise(
                         if let Some(p) = procs.iter_mut().find(|p| p.spec.name == b.name()) {
                             p.held = h;
                         }
+                    }
+                    Action::AskProbe { started_before } => {
+                        command_seq += 1;
+                        let _ = ports.command.send_copy(ServoCommand {
+                            version: msg::VERSION,
+                            command: msg::COMMAND_ESTIMATE_TANGENT,
+                            seq: command_seq,
+                            publish_ns: rt::monotonic_ns(),
+                            started_before,
+                            reserved: 0,
+                        });
                     }
                 }
             }
@@ -1558,12 +1671,12 @@ fn supervise(
                 };
                 if let Some(since) = silent_since {
                     let stall = Duration::from_millis(p.spec.stall_ms);
+                    // Until its data first flows a board may take a while (the servo waits for
+                    // the sensor); from then on, the stall limit alone applies.
                     let grace = Duration::from_secs(if p.spec.name == "servo" { 5 } else { 2 });
-                    if p.spec.stall_ms > 0
-                        && !p.held
-                        && now.duration_since(since.max(p.started)) > stall
-                        && p.started.elapsed() > grace
-                    {
+                    let started = p.data_since.is_some() || p.started.elapsed() > grace;
+                    let silent = now.duration_since(since.max(p.data_since.unwrap_or(p.started)));
+                    if p.spec.stall_ms > 0 && !p.held && started && silent > stall {
                         eprintln!(
                             "afs: {} (pid {}) is alive but silent for {} ms; killing it",
                             p.spec.name,
@@ -1581,9 +1694,6 @@ fn supervise(
                 p.restarts += 1;
                 p.restart_at = None;
                 let resume = p.spec.name == "servo";
-                if resume && let Some(last) = out.joiner.newest_plant.map(|n| n.seq) {
-                    out.faults.servo_restarted_at(last + 1);
-                }
                 if let Err(e) = p.spawn(launch, resume) {
                     eprintln!("afs: restarting {}: {e:#}", p.spec.name);
                     p.state = ProcState::Failed;

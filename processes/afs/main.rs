@@ -139,12 +139,16 @@ enum Command {
     Chaos {
         #[command(flatten)]
         run: RunArgs,
-        /// Number of faults, spread over the run (between 1 s in and 1 s before the end).
+        /// Number of faults, spread over the run (between 1 s in and 1 s before the end), each
+        /// given the time it needs; a plan that cannot fit is refused, naming the shortest run
+        /// that holds it.
         #[arg(long, default_value_t = 10)]
         kills: usize,
-        /// Fault kinds to draw from, comma-separated (default: all): kill-servo, kill-sensor,
-        /// kill-estimator, kill-servo-mid-probe, kill-sensor-mid-probe,
-        /// kill-estimator-mid-request, freeze-sensor, freeze-estimator, bad-samples.
+        /// Fault kinds to draw from, comma-separated (default: all the scenario allows):
+        /// kill-servo, kill-sensor, kill-estimator, kill-servo-mid-probe,
+        /// kill-sensor-mid-probe, kill-estimator-mid-request, freeze-servo, freeze-sensor,
+        /// freeze-estimator, bad-samples. The mid-probe and mid-request kinds ask the servo for
+        /// a tangent probe when due: surface-tracking and corner only.
         #[arg(long, value_delimiter = ',')]
         faults: Vec<String>,
         /// Take the --faults kinds in turn, in the order given, instead of at random.
@@ -279,14 +283,11 @@ fn run() -> Result<ExitCode> {
             faults,
             in_turn,
         } => {
-            let kinds = if faults.is_empty() {
-                FaultKind::ALL.iter().map(|(_, k)| *k).collect()
-            } else {
-                faults
-                    .iter()
-                    .map(|f| FaultKind::from_name(f.trim()).map_err(anyhow::Error::msg))
-                    .collect::<Result<Vec<_>>>()?
-            };
+            // None given: every kind the scenario allows (the supervisor decides).
+            let kinds = faults
+                .iter()
+                .map(|f| FaultKind::from_name(f.trim()).map_err(anyhow::Error::msg))
+                .collect::<Result<Vec<_>>>()?;
             let seed = run.seed.unwrap_or(1);
             run_stack(
                 run,

@@ -26,7 +26,7 @@ struct Cli {
     #[arg(long, default_value_t = 1.5)]
     max_force_age_ms: f64,
     /// Seconds the estimator has to answer before the request is re-sent.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = afs::servo_board::ESTIMATOR_TIMEOUT_S)]
     estimator_timeout: f64,
     /// Sends of one request before keeping the old tangent.
     #[arg(long, default_value_t = 10)]

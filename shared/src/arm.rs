@@ -13,6 +13,8 @@
 //! link 2 and tip about joint 2).
 
 use crate::math::Vec2;
+use iceoryx2_bb_derive_macros::ZeroCopySend;
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use nalgebra::{Matrix2, Vector2};
 use serde::{Deserialize, Serialize};
 
@@ -481,6 +483,19 @@ pub fn tune_pid_for_bandwidth(
     gains(std::f64::consts::TAU * bandwidth_hz / x)
 }
 
+/// The [`JointServo`]s' state, for a snapshot.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+#[type_name("afs::JointServoState")]
+#[repr(C)]
+pub struct JointServoState {
+    /// Integral of the position error per joint (rad·s).
+    pub integral_rad_s: [f64; 2],
+    /// 1 while integrating (0: frozen).
+    pub integrating: u32,
+    /// Reserved (0).
+    pub reserved: u32,
+}
+
 /// The two joint PID servos with torque saturation and anti-windup.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct JointServo {
@@ -511,6 +526,21 @@ impl JointServo {
             let ki = self.gains[j].ki;
             self.integral[j] = if ki > 0.0 { torque[j] / ki } else { 0.0 };
         }
+    }
+
+    /// Its state (the gains and limits are settings).
+    pub fn state(&self) -> JointServoState {
+        JointServoState {
+            integral_rad_s: [self.integral[0], self.integral[1]],
+            integrating: u32::from(self.integrating),
+            reserved: 0,
+        }
+    }
+
+    /// Restores a state taken by [`JointServo::state`].
+    pub fn restore(&mut self, s: &JointServoState) {
+        self.integral = Vector2::new(s.integral_rad_s[0], s.integral_rad_s[1]);
+        self.integrating = s.integrating != 0;
     }
 
     /// Freezes (false) or resumes (true) the integrators; frozen, they hold their torque.

@@ -7,8 +7,28 @@
 //! tool A·sin α along the normal, which must stay below the preload's penetration
 //! `F_preload / k_e` (thesis §6.2.1).
 
+use iceoryx2_bb_derive_macros::ZeroCopySend;
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
+
+/// A running [`Dither`]'s state, for a snapshot: restored into an oscillator of the same
+/// frequency it continues bit for bit.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+#[type_name("afs::DitherState")]
+#[repr(C)]
+pub struct DitherState {
+    /// Phase ωt in [0, 2π) (rad).
+    pub phase_rad: f64,
+    /// Amplitude A (m).
+    pub amplitude_m: f64,
+    /// (sin φ, cos φ) as the rotation recurrence holds them.
+    pub sin_cos: [f64; 2],
+    /// 1 if the last step completed a period.
+    pub wrapped: u32,
+    /// Reserved (0).
+    pub reserved: u32,
+}
 
 /// Dither settings.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -173,6 +193,25 @@ impl Dither {
     /// True if the last step completed a period.
     pub fn completed_period(&self) -> bool {
         self.wrapped
+    }
+
+    /// Its state.
+    pub fn state(&self) -> DitherState {
+        DitherState {
+            phase_rad: self.phase,
+            amplitude_m: self.amplitude,
+            sin_cos: [self.sc.0, self.sc.1],
+            wrapped: u32::from(self.wrapped),
+            reserved: 0,
+        }
+    }
+
+    /// Restores a state taken by [`Dither::state`] (of an oscillator at the same frequency).
+    pub fn restore(&mut self, s: &DitherState) {
+        self.phase = s.phase_rad;
+        self.amplitude = s.amplitude_m;
+        self.sc = (s.sin_cos[0], s.sin_cos[1]);
+        self.wrapped = s.wrapped != 0;
     }
 }
 

@@ -42,7 +42,8 @@ pub enum FaultKind {
     /// (SIGSTOP) when the probe starts, killed once the request is in its queue.
     KillEstimatorMidRequest,
     /// SIGSTOP: alive but silent, until the supervisor's stall policy kills it (or the
-    /// injector sends SIGCONT when the policy is off).
+    /// injector sends SIGCONT when the policy is off). A frozen servo freezes the simulated
+    /// world with it (the plant runs in its process).
     Freeze(Board),
     /// A burst of bad force samples on the wrench stream, one of each [`BadSample`].
     BadSamples,
@@ -50,7 +51,7 @@ pub enum FaultKind {
 
 impl FaultKind {
     /// Every kind, by its command-line name.
-    pub const ALL: [(&'static str, FaultKind); 9] = [
+    pub const ALL: [(&'static str, FaultKind); 10] = [
         ("kill-servo", FaultKind::Kill(Board::Servo)),
         ("kill-sensor", FaultKind::Kill(Board::Sensor)),
         ("kill-estimator", FaultKind::Kill(Board::Estimator)),
@@ -66,6 +67,7 @@ impl FaultKind {
             "kill-estimator-mid-request",
             FaultKind::KillEstimatorMidRequest,
         ),
+        ("freeze-servo", FaultKind::Freeze(Board::Servo)),
         ("freeze-sensor", FaultKind::Freeze(Board::Sensor)),
         ("freeze-estimator", FaultKind::Freeze(Board::Estimator)),
         ("bad-samples", FaultKind::BadSamples),
@@ -89,6 +91,15 @@ impl FaultKind {
             .iter()
             .find(|(_, k)| *k == self)
             .map_or("?", |(n, _)| n)
+    }
+
+    /// True for the kinds that need the servo to probe the tangent (the injector asks it for a
+    /// probe when one is due): only scenarios that track a surface probe.
+    pub fn needs_probe(self) -> bool {
+        matches!(
+            self,
+            FaultKind::KillMidProbe(_) | FaultKind::KillEstimatorMidRequest
+        )
     }
 
     /// The board the fault ends (None: the bad-sample burst ends nothing).
@@ -141,37 +152,189 @@ pub struct PlannedFault {
     pub kind: FaultKind,
 }
 
+/// How long each kind of fault occupies the stack (simulated s), from its due time until the
+/// next fault may come: the wait for its moment, detection, the restart, and the time the
+/// board's data must flow again before it is faulted anew. Built from the stack's policies
+/// (backoff, stall limits) and the scenario's probe; spans are conservative, so that faults
+/// planned back to back do not wait for each other. While the servo is down the simulated
+/// world stands still, so its downtime costs no simulated time at all.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct FaultSpans {
+    /// Restart backoff per board (servo, sensor, estimator) (s).
+    pub backoff_s: [f64; 3],
+    /// Stall limit per board (s; 0: none, a frozen board is let go after `thaw_s`).
+    pub stall_s: [f64; 3],
+    /// A board's start-up beyond its backoff, with margin (s): measured 20–70 ms.
+    pub start_s: f64,
+    /// Data flowing before a board is faulted again (s).
+    pub uptime_s: f64,
+    /// From asking the servo for a probe to its first stroke: stopping, and the normal force
+    /// settling for the probe's hold time (s).
+    pub probe_start_s: f64,
+    /// The probe run, strokes and ramps (s).
+    pub probe_s: f64,
+    /// After a request is killed in flight: the servo's time-out before it sends it again, and
+    /// the answer (s).
+    pub retry_s: f64,
+    /// A frozen board with no stall policy is let go after this long (s).
+    pub thaw_s: f64,
+    /// A bad-sample burst (s).
+    pub burst_s: f64,
+}
+
+impl FaultSpans {
+    /// The span of `kind` (s).
+    pub fn span(&self, kind: FaultKind) -> f64 {
+        let restart = |b: Board| self.backoff_s[b as usize] + self.start_s + self.uptime_s;
+        match kind {
+            FaultKind::Kill(b) => restart(b),
+            FaultKind::Freeze(b) => {
+                let stall = self.stall_s[b as usize];
+                if stall > 0.0 {
+                    stall + restart(b)
+                } else {
+                    self.thaw_s + self.uptime_s
+                }
+            }
+            FaultKind::KillMidProbe(b) => self.probe_start_s + restart(b),
+            FaultKind::KillEstimatorMidRequest => {
+                self.probe_start_s + self.probe_s + self.retry_s + restart(Board::Estimator)
+            }
+            FaultKind::BadSamples => self.burst_s,
+        }
+    }
+
+    /// Checks the spans (finite, ≥ 0, and every kind takes some time).
+    pub fn validate(&self) -> Result<(), PlanError> {
+        let all = self
+            .backoff_s
+            .iter()
+            .chain(&self.stall_s)
+            .chain(&[
+                self.start_s,
+                self.uptime_s,
+                self.probe_start_s,
+                self.probe_s,
+                self.retry_s,
+                self.thaw_s,
+                self.burst_s,
+            ])
+            .all(|v| v.is_finite() && *v >= 0.0);
+        if all && self.burst_s > 0.0 {
+            Ok(())
+        } else {
+            Err(PlanError::Spans)
+        }
+    }
+}
+
+/// Why a fault plan cannot be made.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PlanError {
+    /// No kinds to draw from.
+    #[error("no fault kinds to draw from")]
+    NoKinds,
+    /// The window is empty or not a number.
+    #[error("the faults need a time window: [{start_s}, {end_s}] s is empty")]
+    NoWindow {
+        /// Start (s).
+        start_s: f64,
+        /// End (s).
+        end_s: f64,
+    },
+    /// A span is negative or not a number.
+    #[error("the fault spans must be finite and ≥ 0, and a burst must take some time")]
+    Spans,
+    /// The faults need more time than the window holds.
+    #[error(
+        "{count} faults need {needed_s:.1} s of simulated time between the window's ends; it holds {window_s:.1} s: use a duration of at least {minimum_duration_s:.0} s, or fewer faults"
+    )]
+    TooShort {
+        /// Faults asked for.
+        count: usize,
+        /// Simulated time they need at the least (s).
+        needed_s: f64,
+        /// The window's length (s).
+        window_s: f64,
+        /// The shortest run that holds them (s): their need plus the time outside the window.
+        minimum_duration_s: f64,
+    },
+}
+
 /// `count` faults drawn from `kinds` (at random, or in turn when `in_turn`), due at simulated
-/// times spread over `[start_s, end_s]`: the interval is cut into `count` equal slots and each
-/// fault falls at a random point of the middle half of its slot, so that two faults are at
-/// least half a slot apart. The same seed gives the same plan.
+/// times in `[start_s, end_s]`, each given its span (`spans`) before the next is due, so the
+/// plan always fits: drawn at random, a kind is only drawn if the faults still to come fit in
+/// what is left with the shortest kind; taken in turn, the whole plan must fit. The free time
+/// left over is spread at random between the faults. The same seed gives the same plan.
+/// `outside_s` is the run time outside the window, to name the shortest run in the error.
 pub fn plan(
     seed: u64,
     count: usize,
-    start_s: f64,
-    end_s: f64,
+    (start_s, end_s): (f64, f64),
     kinds: &[FaultKind],
     in_turn: bool,
-) -> Result<Vec<PlannedFault>, String> {
+    spans: &FaultSpans,
+    outside_s: f64,
+) -> Result<Vec<PlannedFault>, PlanError> {
     if kinds.is_empty() {
-        return Err("no fault kinds to draw from".into());
+        return Err(PlanError::NoKinds);
     }
     if !(start_s.is_finite() && end_s.is_finite() && start_s >= 0.0 && end_s > start_s) {
-        return Err(format!(
-            "the faults need a time window: [{start_s}, {end_s}] s is empty"
-        ));
+        return Err(PlanError::NoWindow { start_s, end_s });
     }
+    spans.validate()?;
+    let window = end_s - start_s;
+    let span = |k: FaultKind| spans.span(k);
+    let too_short = |needed_s: f64| PlanError::TooShort {
+        count,
+        needed_s,
+        window_s: window,
+        minimum_duration_s: (needed_s + outside_s).ceil(),
+    };
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let slot = (end_s - start_s) / count.max(1) as f64;
-    Ok((0..count)
-        .map(|i| {
-            let u = f64::from(rng.next_u32()) / f64::from(u32::MAX);
-            let draw = rng.next_u32() as usize;
-            let k = if in_turn { i } else { draw } % kinds.len();
-            PlannedFault {
-                at_s: start_s + slot * (i as f64 + 0.25 + 0.5 * u),
-                kind: kinds[k],
-            }
+    let mut uniform = move || (f64::from(rng.next_u32()) + 0.5) / (f64::from(u32::MAX) + 1.0);
+    // The kinds, in order.
+    let chosen: Vec<FaultKind> = if in_turn {
+        let chosen: Vec<FaultKind> = (0..count).map(|i| kinds[i % kinds.len()]).collect();
+        let needed: f64 = chosen.iter().map(|k| span(*k)).sum();
+        if needed > window {
+            return Err(too_short(needed));
+        }
+        chosen
+    } else {
+        let shortest = kinds.iter().map(|k| span(*k)).fold(f64::INFINITY, f64::min);
+        if shortest * count as f64 > window {
+            return Err(too_short(shortest * count as f64));
+        }
+        let mut used = 0.0;
+        let mut chosen = Vec::with_capacity(count);
+        for i in 0..count {
+            let after = shortest * (count - i - 1) as f64;
+            let fits: Vec<FaultKind> = kinds
+                .iter()
+                .copied()
+                .filter(|k| used + span(*k) + after <= window)
+                .collect();
+            // The shortest kind always fits (checked above, and kept so at every draw).
+            let k = fits[((uniform() * fits.len() as f64) as usize).min(fits.len() - 1)];
+            used += span(k);
+            chosen.push(k);
+        }
+        chosen
+    };
+    // The free time, cut at random into a gap before each fault and one after the last.
+    let free = window - chosen.iter().map(|k| span(*k)).sum::<f64>();
+    let weights: Vec<f64> = (0..=count).map(|_| -uniform().ln()).collect();
+    let total: f64 = weights.iter().sum();
+    let mut t = start_s;
+    Ok(chosen
+        .iter()
+        .zip(&weights)
+        .map(|(k, w)| {
+            t += free * w / total;
+            let f = PlannedFault { at_s: t, kind: *k };
+            t += span(*k);
+            f
         })
         .collect())
 }
@@ -474,33 +637,112 @@ mod tests {
         assert_eq!(f.controller_force_max_abs_n, 2.5);
     }
 
-    #[test]
-    fn plans_are_seeded_spread_and_checked() {
-        let kinds: Vec<FaultKind> = FaultKind::ALL.iter().map(|(_, k)| *k).collect();
-        let a = plan(7, 50, 2.0, 102.0, &kinds, false).unwrap();
-        let b = plan(7, 50, 2.0, 102.0, &kinds, false).unwrap();
-        assert_eq!(a, b);
-        assert_ne!(a, plan(8, 50, 2.0, 102.0, &kinds, false).unwrap());
-        assert_eq!(a.len(), 50);
-        // Slots of 2 s: each fault in the middle half of its own.
-        for (i, f) in a.iter().enumerate() {
-            let lo = 2.0 + 2.0 * i as f64;
-            assert!(f.at_s >= lo + 0.5 && f.at_s <= lo + 1.5, "{i}: {}", f.at_s);
+    /// The spans of the default stack file (examples/stack.toml) and scenario probe.
+    fn spans() -> FaultSpans {
+        FaultSpans {
+            backoff_s: [0.05, 0.02, 0.05],
+            stall_s: [0.5, 0.1, 3.0],
+            start_s: 0.3,
+            uptime_s: 0.5,
+            probe_start_s: 0.6,
+            probe_s: 8.3,
+            retry_s: 1.5,
+            thaw_s: 1.0,
+            burst_s: 0.05,
         }
-        // Every kind drawn at least once in 50 draws of 9.
+    }
+
+    /// Each fault is due after the one before has had its span, and the last one's span ends
+    /// in the window.
+    fn assert_fits(p: &[PlannedFault], start: f64, end: f64, sp: &FaultSpans) {
+        let mut free_from = start;
+        for (i, f) in p.iter().enumerate() {
+            assert!(
+                f.at_s >= free_from - 1e-9,
+                "fault {i} at {} s overlaps: {p:?}",
+                f.at_s
+            );
+            free_from = f.at_s + sp.span(f.kind);
+        }
+        assert!(
+            free_from <= end + 1e-9,
+            "the last span ends at {free_from} s > {end} s"
+        );
+    }
+
+    /// Plans are seeded, every kind is drawn, spans never overlap, and a random plan fits
+    /// whatever the seed, also where one kind is as long as the window allows only once.
+    #[test]
+    fn plans_are_seeded_and_always_fit() {
+        let sp = spans();
+        let kinds: Vec<FaultKind> = FaultKind::ALL.iter().map(|(_, k)| *k).collect();
+        let a = plan(7, 50, (2.0, 200.0), &kinds, false, &sp, 2.0).unwrap();
+        assert_eq!(
+            a,
+            plan(7, 50, (2.0, 200.0), &kinds, false, &sp, 2.0).unwrap()
+        );
+        assert_ne!(
+            a,
+            plan(8, 50, (2.0, 200.0), &kinds, false, &sp, 2.0).unwrap()
+        );
+        assert_eq!(a.len(), 50);
+        assert_fits(&a, 2.0, 200.0, &sp);
         for (name, k) in FaultKind::ALL {
             assert!(a.iter().any(|f| f.kind == k), "{name} never drawn");
             assert_eq!(FaultKind::from_name(name), Ok(k));
             assert_eq!(k.name(), name);
         }
         assert!(FaultKind::from_name("kill-everything").is_err());
-        // In turn: the kinds cycle.
-        let two = [kinds[0], kinds[8]];
-        let t = plan(7, 5, 0.0, 10.0, &two, true).unwrap();
+        // 8 faults of every kind in the 18 s of a 20-s run, at 200 seeds: the mid-request kill
+        // (its span is 11.3 s) is drawn at most once, and every plan fits.
+        for seed in 0..200 {
+            let p = plan(seed, 8, (1.0, 19.0), &kinds, false, &sp, 2.0).unwrap();
+            assert_eq!(p.len(), 8);
+            assert_fits(&p, 1.0, 19.0, &sp);
+            let long = p
+                .iter()
+                .filter(|f| f.kind == FaultKind::KillEstimatorMidRequest)
+                .count();
+            assert!(long <= 1, "seed {seed}: {p:?}");
+        }
+    }
+
+    /// Taken in turn the kinds cycle; a plan that cannot fit is refused with the shortest run
+    /// that holds it, and that run's window does hold it.
+    #[test]
+    fn plans_that_cannot_fit_name_the_shortest_run() {
+        let sp = spans();
+        let two = [FaultKind::Kill(Board::Sensor), FaultKind::BadSamples];
+        let t = plan(7, 5, (0.0, 10.0), &two, true, &sp, 2.0).unwrap();
         let got: Vec<FaultKind> = t.iter().map(|f| f.kind).collect();
         assert_eq!(got, [two[0], two[1], two[0], two[1], two[0]]);
-        assert!(plan(1, 3, 5.0, 5.0, &kinds, false).is_err());
-        assert!(plan(1, 3, 0.0, 5.0, &[], false).is_err());
-        assert!(plan(1, 3, f64::NAN, 5.0, &kinds, false).is_err());
+        let mid = [FaultKind::KillEstimatorMidRequest];
+        let err = plan(1, 2, (1.0, 19.0), &mid, true, &sp, 2.0).unwrap_err();
+        let PlanError::TooShort {
+            needed_s,
+            minimum_duration_s,
+            ..
+        } = err
+        else {
+            panic!("{err:?}");
+        };
+        assert!((needed_s - 2.0 * sp.span(mid[0])).abs() < 1e-9);
+        assert!(err.to_string().contains("at least 25 s"), "{err}");
+        let fits = plan(1, 2, (1.0, minimum_duration_s - 1.0), &mid, true, &sp, 2.0).unwrap();
+        assert_fits(&fits, 1.0, minimum_duration_s - 1.0, &sp);
+        // At random, the shortest kind sets the limit.
+        let kinds = [FaultKind::Kill(Board::Sensor), mid[0]];
+        assert!(plan(1, 30, (1.0, 19.0), &kinds, false, &sp, 2.0).is_err());
+        assert!(plan(1, 3, (5.0, 5.0), &kinds, false, &sp, 2.0).is_err());
+        assert!(plan(1, 3, (0.0, 5.0), &[], false, &sp, 2.0).is_err());
+        assert!(plan(1, 3, (f64::NAN, 5.0), &kinds, false, &sp, 2.0).is_err());
+        let bad = FaultSpans {
+            start_s: f64::NAN,
+            ..sp
+        };
+        assert_eq!(
+            plan(1, 3, (0.0, 50.0), &kinds, false, &bad, 2.0),
+            Err(PlanError::Spans)
+        );
     }
 }

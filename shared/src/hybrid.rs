@@ -18,6 +18,8 @@
 //! A new tangent estimate is fed forward by re-basing the frame at the current set-point.
 
 use crate::math::{Vec2, perp, unit};
+use iceoryx2_bb_derive_macros::ZeroCopySend;
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::{Deserialize, Serialize};
 
 /// Settings of the hybrid controller.
@@ -136,6 +138,31 @@ pub struct HybridCommand {
     pub tangential_force_n: f64,
 }
 
+/// A [`HybridController`]'s state, for a snapshot.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+#[type_name("afs::HybridState")]
+#[repr(C)]
+pub struct HybridState {
+    /// Task-frame origin (m, world).
+    pub origin_m: [f64; 2],
+    /// Estimated tangent angle (rad, world).
+    pub tangent_angle_rad: f64,
+    /// Tangential position from the origin (m).
+    pub s_m: f64,
+    /// Nominal tangential velocity (m/s).
+    pub s_dot_m_per_s: f64,
+    /// Requested nominal tangential velocity (m/s).
+    pub velocity_target_m_per_s: f64,
+    /// Normal set-point into the surface from the origin (m).
+    pub depth_m: f64,
+    /// Its rate from the force loop (m/s).
+    pub depth_rate_m_per_s: f64,
+    /// Desired normal force (N).
+    pub preload_n: f64,
+    /// Stiffness of the Hooke's-law update (N/m).
+    pub hooke_stiffness_n_per_m: f64,
+}
+
 /// Hybrid position/force controller state.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct HybridController {
@@ -179,6 +206,33 @@ impl HybridController {
     /// The settings.
     pub fn params(&self) -> &HybridParams {
         &self.params
+    }
+
+    /// Its state: task frame, set-points, force loop.
+    pub fn state(&self) -> HybridState {
+        HybridState {
+            origin_m: [self.frame.origin.x, self.frame.origin.y],
+            tangent_angle_rad: self.frame.tangent_angle,
+            s_m: self.s,
+            s_dot_m_per_s: self.s_dot,
+            velocity_target_m_per_s: self.v_target,
+            depth_m: self.depth,
+            depth_rate_m_per_s: self.depth_rate,
+            preload_n: self.params.preload_n,
+            hooke_stiffness_n_per_m: self.hooke_stiffness,
+        }
+    }
+
+    /// Restores a state taken by [`HybridController::state`].
+    pub fn restore(&mut self, s: &HybridState) {
+        self.frame = TaskFrame::new(Vec2::new(s.origin_m[0], s.origin_m[1]), s.tangent_angle_rad);
+        self.s = s.s_m;
+        self.s_dot = s.s_dot_m_per_s;
+        self.v_target = s.velocity_target_m_per_s;
+        self.depth = s.depth_m;
+        self.depth_rate = s.depth_rate_m_per_s;
+        self.params.preload_n = s.preload_n;
+        self.hooke_stiffness = s.hooke_stiffness_n_per_m;
     }
 
     /// Changes the desired normal force (N).

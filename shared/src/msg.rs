@@ -11,12 +11,17 @@
 //! Conversions to and from the core's types ([`TangentOutcome`], [`TangentParams`],
 //! [`ProbePlan`]) live here so that both ends of a service use the same code.
 
+use crate::arm::JointServoState;
+use crate::dither::DitherState;
+use crate::hybrid::HybridState;
 use crate::sensor::Wrench;
-use crate::servo::{EstimationCounters, ServoDiag, ServoMode};
+use crate::servo::{EstimationCounters, ServoDiag, ServoMode, ServoState};
 use crate::tangent::{
     MAX_PROBES, ProbePlan, ReprobeReason, TangentError, TangentEstimate, TangentMethod,
     TangentOutcome, TangentParams,
 };
+use crate::tuner::TunerState;
+use crate::window::{PeriodWindowState, SlidingSummary};
 use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
@@ -47,6 +52,8 @@ pub mod service {
     pub const SUPERVISOR: &str = "afs/supervisor/status";
     /// [`BoardStartup`](super::BoardStartup), once per board process (boards → supervisor).
     pub const STARTUP: &str = "afs/boards/startup";
+    /// [`ServoCommand`], on demand (supervisor, clients → servo).
+    pub const COMMAND: &str = "afs/servo/command";
     /// Blackboard of the world's state (key 0: [`WorldSnapshot`](super::WorldSnapshot)),
     /// owned by the supervisor, written by the servo.
     pub const WORLD: &str = "afs/plant/world";
@@ -237,29 +244,20 @@ pub struct ServoSample {
     pub aborted: u32,
     /// Entries into the safe state.
     pub safe_entries: u32,
+    /// Estimations started because they were asked for ([`ServoCommand`]).
+    pub estimations_requested: u32,
+    /// Reserved (0).
+    pub reserved: u32,
 }
 
 /// [`ServoMode`] as a number: 0 track, 1 stopping, 2 probing, 3 awaiting estimate, 4 resuming.
 pub fn servo_mode_code(m: ServoMode) -> u32 {
-    match m {
-        ServoMode::Track => 0,
-        ServoMode::Stopping => 1,
-        ServoMode::Probing => 2,
-        ServoMode::AwaitingEstimate => 3,
-        ServoMode::Resuming => 4,
-    }
+    m.code()
 }
 
 /// The inverse of [`servo_mode_code`].
 pub fn servo_mode_from_code(c: u32) -> Option<ServoMode> {
-    Some(match c {
-        0 => ServoMode::Track,
-        1 => ServoMode::Stopping,
-        2 => ServoMode::Probing,
-        3 => ServoMode::AwaitingEstimate,
-        4 => ServoMode::Resuming,
-        _ => return None,
-    })
+    ServoMode::from_code(c)
 }
 
 impl ServoSample {
@@ -300,7 +298,33 @@ impl ServoSample {
         self.failures = n(c.failures);
         self.aborted = n(c.aborted);
         self.safe_entries = n(c.safe_entries);
+        self.estimations_requested = n(c.requested);
     }
+}
+
+/// [`ServoCommand::command`]: estimate the tangent now (stop, probe, wait for the estimate,
+/// resume), or as soon as the servo tracks again, unless an estimation started since the
+/// command was sent (`started_before`).
+pub const COMMAND_ESTIMATE_TANGENT: u32 = 1;
+
+/// A command to the servo (thesis §5.3.2: surface tracking on demand).
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+#[type_name("afs::ServoCommand")]
+#[repr(C)]
+pub struct ServoCommand {
+    /// [`VERSION`].
+    pub version: u32,
+    /// `COMMAND_*`.
+    pub command: u32,
+    /// Sender's sequence number.
+    pub seq: u64,
+    /// Monotonic time of publication (ns).
+    pub publish_ns: u64,
+    /// [`COMMAND_ESTIMATE_TANGENT`]: the servo's `estimations_started` the sender last saw; the
+    /// command lapses once more estimations than this have started.
+    pub started_before: u32,
+    /// Reserved (0).
+    pub reserved: u32,
 }
 
 /// Percentiles of a latency distribution (ns).
@@ -380,6 +404,10 @@ pub struct LoopStats {
     pub answers: u64,
     /// Samples the servo could not publish (no memory to loan).
     pub publish_failures: u64,
+    /// Commands received ([`ServoCommand`]).
+    pub commands: u64,
+    /// Commands refused (unknown version or command code).
+    pub bad_commands: u64,
 }
 
 /// The tangent estimator's settings, as sent with each request (the estimator is stateless).
@@ -956,14 +984,11 @@ pub struct WorldSnapshot {
     pub friction_face: [u64; 2],
     /// Friction slots: bristle deflection (m).
     pub friction_deflection_m: [f64; 2],
-    /// Estimated tangent angle in use (rad).
-    pub tangent_angle_rad: f64,
-    /// Commanded Aω to restore (m/s).
-    pub a_omega_m_per_s: f64,
-    /// Nominal velocity target to restore (m/s).
-    pub velocity_m_per_s: f64,
     /// The driver's leg start: time (s) and surface position (m).
     pub driver_leg_start: [f64; 2],
+    /// The controller ([`crate::servo::ServoCore::state`]): a restarted servo carries on
+    /// with it.
+    pub controller: ServoState,
     /// The world sample of tick `seq`, exactly as published (written before it is sent): a
     /// restarted servo sends it again, so the tick reaches subscribers whether or not its
     /// predecessor died before sending it; a subscriber drops the identical repeat.
@@ -1108,7 +1133,11 @@ pub fn layouts() -> Vec<MessageLayout> {
             tangent_velocity_m_per_s: "f64",
             tangent_angle_rad: "f64", set_point_m: "f64[2]", torque_nm: "f64[2]",
             estimations_started: "u32", estimates: "u32", reprobes: "u32", failures: "u32",
-            aborted: "u32", safe_entries: "u32",
+            aborted: "u32", safe_entries: "u32", estimations_requested: "u32", reserved: "u32",
+        ]),
+        layout!(ServoCommand, "ServoCommand", [
+            version: "u32", command: "u32", seq: "u64", publish_ns: "u64",
+            started_before: "u32", reserved: "u32",
         ]),
         layout!(Quantiles, "Quantiles", [
             p50: "u64", p90: "u64", p99: "u64", p999: "u64", p9999: "u64", max: "u64",
@@ -1120,6 +1149,7 @@ pub fn layouts() -> Vec<MessageLayout> {
             bad_seq_repeat: "u64", bad_seq_backwards: "u64", bad_future: "u64",
             bad_version: "u64", stale_ticks: "u64", safe_entries: "u64", safe_ticks: "u64",
             requests: "u64", retries: "u64", answers: "u64", publish_failures: "u64",
+            commands: "u64", bad_commands: "u64",
         ]),
         layout!(crate::tangent::ProbeSample, "ProbeSample", [
             t: "f64", force: "f64[2]", tip: "f64[2]", phase: "f64", probe: "u8",
@@ -1182,9 +1212,40 @@ pub fn layouts() -> Vec<MessageLayout> {
         layout!(WorldSnapshot, "WorldSnapshot", [
             version: "u32", driver_leg: "u32", seq: "u64", time_s: "f64", q_rad: "f64[2]",
             qd_rad_per_s: "f64[2]", friction_face: "u64[2]",
-            friction_deflection_m: "f64[2]", tangent_angle_rad: "f64",
-            a_omega_m_per_s: "f64", velocity_m_per_s: "f64", driver_leg_start: "f64[2]",
-            plant: "PlantSample",
+            friction_deflection_m: "f64[2]", driver_leg_start: "f64[2]",
+            controller: "ServoState", plant: "PlantSample",
+        ]),
+        layout!(ServoState, "ServoState", [
+            mode: "u32", flags: "u32", last_trigger: "u32", reserved: "u32",
+            counters: "u32[10]", joints: "JointServoState", hybrid: "HybridState",
+            dither: "DitherState", tuner: "TunerState", tare: "f64[3]", last_q_d_rad: "f64[2]",
+            resume_velocity_m_per_s: "f64", normal_filtered_n: "f64", odometer_m: "f64[2]",
+            last_estimate: "f64[2]", curvature_per_m: "f64", curve_base_rad: "f64",
+            drift_rad: "f64", stopped_settled_s: "f64[2]", normal_window: "SlidingSummary",
+            safe: "f64[4]", resume_a_omega_m_per_s: "f64", last_stroke_m: "f64[2]",
+        ]),
+        layout!(JointServoState, "JointServoState", [
+            integral_rad_s: "f64[2]", integrating: "u32", reserved: "u32",
+        ]),
+        layout!(HybridState, "HybridState", [
+            origin_m: "f64[2]", tangent_angle_rad: "f64", s_m: "f64", s_dot_m_per_s: "f64",
+            velocity_target_m_per_s: "f64", depth_m: "f64", depth_rate_m_per_s: "f64",
+            preload_n: "f64", hooke_stiffness_n_per_m: "f64",
+        ]),
+        layout!(DitherState, "DitherState", [
+            phase_rad: "f64", amplitude_m: "f64", sin_cos: "f64[2]", wrapped: "u32",
+            reserved: "u32",
+        ]),
+        layout!(TunerState, "TunerState", [
+            a_omega_m_per_s: "f64", stribeck_velocity_estimate_m_per_s: "f64",
+            transmission: "f64", friction_scale: "f64", window: "SlidingSummary",
+            periods: "PeriodWindowState",
+        ]),
+        layout!(SlidingSummary, "SlidingSummary", [
+            len: "u64", mean: "f64", variance: "f64",
+        ]),
+        layout!(PeriodWindowState, "PeriodWindowState", [
+            current: "f64[8]", ring: "f64[16][8]", filled: "u32", head: "u32",
         ]),
     ]
 }

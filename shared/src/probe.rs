@@ -24,7 +24,7 @@ enum Stage {
 }
 
 /// Executes and records a probe plan.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct ProbeRunner {
     plan: ProbePlan,
     base_angle: f64,
@@ -34,6 +34,25 @@ pub struct ProbeRunner {
     tick: usize,
     time: f64,
     truncated: bool,
+}
+
+impl Clone for ProbeRunner {
+    /// A copy with the same record capacity (a derived clone would keep only the length, and
+    /// the copy could then not record without allocating).
+    fn clone(&self) -> Self {
+        let mut samples = Vec::with_capacity(self.samples.capacity());
+        samples.extend_from_slice(&self.samples);
+        Self {
+            plan: self.plan,
+            base_angle: self.base_angle,
+            stage: self.stage,
+            samples,
+            decimation: self.decimation,
+            tick: self.tick,
+            time: self.time,
+            truncated: self.truncated,
+        }
+    }
 }
 
 impl ProbeRunner {

@@ -281,24 +281,12 @@ impl ScenarioDriver {
         DriverState::Running
     }
 
-    /// Re-applies the commands in force at scenario time `t` to a freshly built servo (after a
-    /// servo restart), from what the world snapshot recorded: velocity, Aω and the driver's
-    /// [`DriverMemo`].
-    pub fn resume(
-        &mut self,
-        t: f64,
-        velocity: f64,
-        a_omega: f64,
-        memo: DriverMemo,
-        servo: &mut ServoCore,
-    ) {
+    /// Carries on at scenario time `t` after a servo restart, from the driver's
+    /// [`DriverMemo`] in the world snapshot; the commands it gave are in the controller's own
+    /// snapshot ([`ServoCore::restore`]), so nothing is given again.
+    pub fn resume(&mut self, t: f64, memo: DriverMemo) {
         self.started = true;
-        servo.set_a_omega(a_omega);
-        servo.hybrid_mut().set_velocity(velocity);
-        if self.kind == ScenarioKind::FrictionSuppression && t >= TUNING_START_S {
-            self.tuning = true;
-            servo.set_tuning(true);
-        }
+        self.tuning = self.kind == ScenarioKind::FrictionSuppression && t >= TUNING_START_S;
         self.id_leg = memo.leg.map_or(usize::MAX, |l| l as usize);
         self.id_leg_start_s = memo.leg_start_s;
         self.id_leg_start_u = memo.leg_start_u;
@@ -619,6 +607,8 @@ pub struct ScenarioMonitor {
     counters: EstimationCounters,
     safe_ticks: u64,
     invalid: Vec<TickRange>,
+    requested: Vec<u64>,
+    restarts: Vec<u64>,
 }
 
 /// A run of consecutive servo ticks, by sequence number.
@@ -655,6 +645,8 @@ impl ScenarioMonitor {
             counters: EstimationCounters::default(),
             safe_ticks: 0,
             invalid: Vec::new(),
+            requested: Vec::new(),
+            restarts: Vec::new(),
         }
     }
 
@@ -662,6 +654,28 @@ impl ScenarioMonitor {
     /// ranges of sequence numbers: what [`run_lockstep_replay`] replays.
     pub fn force_invalid(&self) -> &[TickRange] {
         &self.invalid
+    }
+
+    /// The ticks at which the servo started an estimation it was asked for.
+    pub fn requested(&self) -> &[u64] {
+        &self.requested
+    }
+
+    /// A restarted servo runs the world on from tick `seq` (the supervisor knows; the samples
+    /// do not tell).
+    pub fn servo_restarted_at(&mut self, seq: u64) {
+        if self.restarts.last().is_none_or(|&l| seq > l) {
+            self.restarts.push(seq);
+        }
+    }
+
+    /// What [`run_lockstep_replay`] needs to go through the same events as the stack.
+    pub fn replay(&self) -> Replay<'_> {
+        Replay {
+            force_invalid: &self.invalid,
+            requested: &self.requested,
+            servo_restarts: &self.restarts,
+        }
     }
 
     fn note_invalid(&mut self, seq: u64) {
@@ -679,8 +693,12 @@ impl ScenarioMonitor {
     pub fn push(&mut self, p: &PlantSample, s: &ServoSample) {
         let m = MonitorTick::from_samples(p, s);
         self.tracking.push(&m);
+        if s.estimations_requested as usize > self.counters.requested {
+            self.requested.push(s.seq);
+        }
         self.counters = EstimationCounters {
             started: s.estimations_started as usize,
+            requested: s.estimations_requested as usize,
             estimates: s.estimates as usize,
             reprobes: s.reprobes as usize,
             failures: s.failures as usize,
@@ -781,19 +799,34 @@ pub struct ScenarioReport {
 /// the real-time stack is compared with. Tick `seq` (from 1, as the servo numbers them) steps
 /// the world from simulated time (seq − 1)·dt.
 pub fn run_lockstep(scenario: &Scenario, duration_s: f64) -> Result<ScenarioReport, String> {
-    run_lockstep_replay(scenario, duration_s, &[])
+    run_lockstep_replay(scenario, duration_s, &Replay::default())
 }
 
-/// [`run_lockstep`], with the servo's force input made invalid on the ticks the real-time
-/// stack could not use its force data (`invalid`, from
-/// [`ScenarioMonitor::force_invalid`]): the reference then goes through the same safe-state
-/// episodes at the same ticks, so that a scheduling hiccup of the machine (which aborts a
-/// probe run and shifts every later event) is part of both runs rather than a disagreement.
+/// Events of a real-time run that the lockstep reference goes through at the same ticks
+/// ([`ScenarioMonitor::replay`]).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Replay<'a> {
+    /// Ticks whose force data the servo could not use, in order.
+    pub force_invalid: &'a [TickRange],
+    /// Ticks at which the servo started an estimation it was asked for, in order.
+    pub requested: &'a [u64],
+    /// Ticks run first by a restarted servo, in order.
+    pub servo_restarts: &'a [u64],
+}
+
+/// [`run_lockstep`], going through the real-time run's events at the same ticks (`replay`,
+/// from [`ScenarioMonitor::replay`]): the servo's force input is made invalid on the ticks the
+/// stack could not use its force data, so the reference goes through the same safe-state
+/// episodes (a scheduling hiccup of the machine aborts a probe run and shifts every later
+/// event: part of both runs rather than a disagreement), the servo is asked for a tangent
+/// estimate on the ticks the stack's servo started one on request, and it is restarted from
+/// its own state ([`Lockstep::restart_servo`]) before the ticks a restarted servo ran first.
 pub fn run_lockstep_replay(
     scenario: &Scenario,
     duration_s: f64,
-    invalid: &[TickRange],
+    replay: &Replay<'_>,
 ) -> Result<ScenarioReport, String> {
+    let invalid = replay.force_invalid;
     let mut sim = Lockstep::new(&scenario.cfg)?;
     let mut driver = scenario.driver();
     let mut monitor = scenario.monitor();
@@ -803,6 +836,9 @@ pub fn run_lockstep_replay(
     for seq in 1..=limit {
         let t = (seq - 1) as f64 * dt;
         let u = sim.truth().surface_u_m;
+        if replay.servo_restarts.binary_search(&seq).is_ok() {
+            sim.restart_servo()?;
+        }
         if driver.step(t, u, sim.servo_mut()) == DriverState::Done {
             break;
         }
@@ -811,6 +847,9 @@ pub fn run_lockstep_replay(
         }
         let valid = !invalid.get(next).is_some_and(|r| r.contains(seq));
         sim.set_force_valid(valid);
+        if replay.requested.binary_search(&seq).is_ok() {
+            sim.servo_mut().request_tangent_estimate();
+        }
         sim.step();
         let p = plant_sample(sim.truth(), seq, 0);
         let mut s = servo_sample(sim.servo(), seq, 0, sim.time());
@@ -960,7 +999,7 @@ mod tests {
         let base = SimConfig::default();
         let s = Scenario::new("surface-tracking", &base).unwrap();
         let plain = run_lockstep(&s, 1.0).unwrap();
-        let none = run_lockstep_replay(&s, 1.0, &[]).unwrap();
+        let none = run_lockstep_replay(&s, 1.0, &Replay::default()).unwrap();
         assert_eq!(
             plain.tracking.tangent_error_rms_deg,
             none.tracking.tangent_error_rms_deg
@@ -976,7 +1015,15 @@ mod tests {
                 len: 1,
             },
         ];
-        let replayed = run_lockstep_replay(&s, 1.0, &gaps).unwrap();
+        let replayed = run_lockstep_replay(
+            &s,
+            1.0,
+            &Replay {
+                force_invalid: &gaps,
+                ..Replay::default()
+            },
+        )
+        .unwrap();
         // Each gap enters the safe state, which lasts until the data has been good for the
         // recovery time (20 ms = 200 ticks) after the gap.
         assert!(replayed.safe_ticks >= 2 * 200, "{}", replayed.safe_ticks);

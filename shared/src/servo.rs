@@ -6,15 +6,22 @@
 //! never panics on bad numbers: a non-finite force is treated as missing data (force loop and
 //! tuner frozen), an unreachable set-point holds the last reachable one.
 
-use crate::arm::{Arm, ArmParams, Elbow, JointServo, PidGains, tune_pid_for_bandwidth};
-use crate::dither::{Dither, DitherParams};
+use crate::arm::{
+    Arm, ArmParams, Elbow, JointServo, JointServoState, PidGains, tune_pid_for_bandwidth,
+};
+use crate::dither::{Dither, DitherParams, DitherState};
 use crate::friction::FrictionLaw;
-use crate::hybrid::{HybridCommand, HybridController, HybridParams, SetpointOffset, TaskFrame};
+use crate::hybrid::{
+    HybridCommand, HybridController, HybridParams, HybridState, SetpointOffset, TaskFrame,
+};
 use crate::math::Vec2;
 use crate::probe::ProbeRunner;
 use crate::sensor::Wrench;
 use crate::tangent::{ProbePlan, ProbeSample, TangentOutcome, TangentParams};
-use crate::tuner::{Tuner, TunerConfig, TunerContext, TunerInput, TunerReport};
+use crate::tuner::{Tuner, TunerConfig, TunerContext, TunerInput, TunerReport, TunerState};
+use crate::window::SlidingSummary;
+use iceoryx2_bb_derive_macros::ZeroCopySend;
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use nalgebra::{Matrix2, Vector2};
 use serde::{Deserialize, Serialize};
 
@@ -191,6 +198,31 @@ pub enum ServoMode {
     Resuming,
 }
 
+impl ServoMode {
+    /// Its wire code: 0 track, 1 stopping, 2 probing, 3 awaiting estimate, 4 resuming.
+    pub fn code(self) -> u32 {
+        match self {
+            ServoMode::Track => 0,
+            ServoMode::Stopping => 1,
+            ServoMode::Probing => 2,
+            ServoMode::AwaitingEstimate => 3,
+            ServoMode::Resuming => 4,
+        }
+    }
+
+    /// The mode of a wire code (None: unknown).
+    pub fn from_code(c: u32) -> Option<Self> {
+        Some(match c {
+            0 => ServoMode::Track,
+            1 => ServoMode::Stopping,
+            2 => ServoMode::Probing,
+            3 => ServoMode::AwaitingEstimate,
+            4 => ServoMode::Resuming,
+            _ => return None,
+        })
+    }
+}
+
 /// Why an estimation started.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
@@ -203,6 +235,28 @@ pub enum Trigger {
     Slope,
     /// Periodic, by travel.
     Travel,
+}
+
+impl Trigger {
+    /// Its code in [`ServoState::last_trigger`] (1–4; 0 is none).
+    fn code(self) -> u32 {
+        match self {
+            Trigger::Request => 1,
+            Trigger::Force => 2,
+            Trigger::Slope => 3,
+            Trigger::Travel => 4,
+        }
+    }
+
+    fn from_code(c: u32) -> Option<Self> {
+        Some(match c {
+            1 => Trigger::Request,
+            2 => Trigger::Force,
+            3 => Trigger::Slope,
+            4 => Trigger::Travel,
+            _ => return None,
+        })
+    }
 }
 
 /// A finished probe run waiting for the estimator.
@@ -223,6 +277,8 @@ pub struct ProbeRequest<'a> {
 pub struct EstimationCounters {
     /// Estimations started.
     pub started: usize,
+    /// Of those, asked for by the caller ([`ServoCore::request_tangent_estimate`]).
+    pub requested: usize,
     /// Accepted estimates.
     pub estimates: usize,
     /// Re-probes asked for.
@@ -417,6 +473,134 @@ pub struct ServoCore {
     resume_a_omega: Option<f64>,
     /// The probe stroke commanded last tick (to absorb it if the probe is abandoned).
     last_stroke: SetpointOffset,
+}
+
+/// [`ServoState::flags`]: on-line tuning on.
+pub const STATE_TUNING: u32 = 1;
+/// [`ServoState::flags`]: the normal force loop on.
+pub const STATE_FORCE_CONTROL: u32 = 2;
+/// [`ServoState::flags`]: the force trigger armed.
+pub const STATE_FORCE_ARMED: u32 = 4;
+/// [`ServoState::flags`]: in the safe state (the `safe_*` fields hold it).
+pub const STATE_SAFE: u32 = 8;
+/// [`ServoState::flags`]: an Aω to restore when `Resuming` ends.
+pub const STATE_RESUME_A_OMEGA: u32 = 16;
+/// [`ServoState::flags`]: an accepted estimate so far (`last_estimate`).
+pub const STATE_LAST_ESTIMATE: u32 = 32;
+
+/// Everything the fast loop carries from one tick to the next, for a snapshot: a servo built
+/// with the same settings and start ([`ServoCore::new`]) and given this state
+/// ([`ServoCore::restore`]) carries on where the one that took it stopped. Two things come
+/// back in brief: the moving average of the normal force over a dither period (and the thesis
+/// tuner's friction window) keep their mean and variance, not their samples
+/// ([`crate::window::SlidingSummary`]); and a probe run in progress, whose record is not kept,
+/// starts again from its beginning (stop, settle, strokes), as does one whose estimate was
+/// awaited.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+#[type_name("afs::ServoState")]
+#[repr(C)]
+pub struct ServoState {
+    /// [`ServoMode`] code (as `msg::servo_mode_code`).
+    pub mode: u32,
+    /// `STATE_*` flags.
+    pub flags: u32,
+    /// What started the last estimation: 0 none, 1 request, 2 force, 3 slope, 4 travel.
+    pub last_trigger: u32,
+    /// Reserved (0).
+    pub reserved: u32,
+    /// [`EstimationCounters`]: started, requested, estimates, reprobes, failures,
+    /// force_triggers, slope_triggers, aborted, safe_entries, and a reserved 0.
+    pub counters: [u32; 10],
+    /// Joint servos.
+    pub joints: JointServoState,
+    /// Hybrid controller (task frame, set-points, force loop).
+    pub hybrid: HybridState,
+    /// Dither oscillator.
+    pub dither: DitherState,
+    /// Dither tuner.
+    pub tuner: TunerState,
+    /// Sensor zero-load reading: force (N), moment (N·m).
+    pub tare: [f64; 3],
+    /// Last reachable joint set-point (rad).
+    pub last_q_d_rad: [f64; 2],
+    /// Velocity to go back to after an estimation (m/s).
+    pub resume_velocity_m_per_s: f64,
+    /// Filtered dither-period mean of the normal force (N).
+    pub normal_filtered_n: f64,
+    /// Travel since the last accepted estimate, and in all (m).
+    pub odometer_m: [f64; 2],
+    /// Last accepted estimate: tangent angle (rad) and total travel at it (m).
+    pub last_estimate: [f64; 2],
+    /// Curvature fed forward (1/m).
+    pub curvature_per_m: f64,
+    /// The angle it turns from (rad).
+    pub curve_base_rad: f64,
+    /// Low-passed tangent error the force loop absorbs (rad).
+    pub drift_rad: f64,
+    /// Time stopped, and time the normal force has been settled (s).
+    pub stopped_settled_s: [f64; 2],
+    /// Moving average of the normal force over a dither period, in brief.
+    pub normal_window: SlidingSummary,
+    /// Safe state: velocity and Aω to restore (m/s), back-off left (m), good data for (s).
+    pub safe: [f64; 4],
+    /// Aω to restore when `Resuming` ends (m/s).
+    pub resume_a_omega_m_per_s: f64,
+    /// The probe stroke commanded last tick (m), absorbed into the set-point if a probe run
+    /// is restarted.
+    pub last_stroke_m: [f64; 2],
+}
+
+impl ServoState {
+    /// True when every number is finite and the codes are known (a snapshot that is not must
+    /// not be restored).
+    pub fn is_sane(&self) -> bool {
+        let mut finite = true;
+        let mut all = |v: &[f64]| finite &= v.iter().all(|x| x.is_finite());
+        let (j, h, d, t) = (&self.joints, &self.hybrid, &self.dither, &self.tuner);
+        all(&j.integral_rad_s);
+        all(&h.origin_m);
+        all(&[
+            h.tangent_angle_rad,
+            h.s_m,
+            h.s_dot_m_per_s,
+            h.velocity_target_m_per_s,
+            h.depth_m,
+            h.depth_rate_m_per_s,
+            h.preload_n,
+            h.hooke_stiffness_n_per_m,
+        ]);
+        all(&[d.phase_rad, d.amplitude_m, d.sin_cos[0], d.sin_cos[1]]);
+        all(&[
+            t.a_omega_m_per_s,
+            t.stribeck_velocity_estimate_m_per_s,
+            t.transmission,
+            t.friction_scale,
+            t.window.mean,
+            t.window.variance,
+        ]);
+        all(&t.periods.current);
+        for p in &t.periods.ring {
+            all(p);
+        }
+        all(&self.tare);
+        all(&self.last_q_d_rad);
+        all(&[
+            self.resume_velocity_m_per_s,
+            self.normal_filtered_n,
+            self.curvature_per_m,
+            self.curve_base_rad,
+            self.drift_rad,
+            self.normal_window.mean,
+            self.normal_window.variance,
+            self.resume_a_omega_m_per_s,
+        ]);
+        all(&self.odometer_m);
+        all(&self.last_estimate);
+        all(&self.stopped_settled_s);
+        all(&self.safe);
+        all(&self.last_stroke_m);
+        finite && self.mode <= 4 && self.last_trigger <= 4
+    }
 }
 
 /// Probe samples are recorded every this many servo ticks (1 kHz at 10 kHz).
@@ -634,6 +818,139 @@ impl ServoCore {
         self.last_trigger
     }
 
+    /// Everything it carries from tick to tick ([`ServoState`]).
+    pub fn state(&self) -> ServoState {
+        let c = &self.counters;
+        let n = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
+        let flag = |on: bool, f: u32| if on { f } else { 0 };
+        let safe = self.safe.map_or([0.0; 4], |s| {
+            [
+                s.resume_velocity,
+                s.resume_a_omega,
+                s.backoff_left,
+                s.good_for_s,
+            ]
+        });
+        let (angle, at) = self.last_estimate.unwrap_or((0.0, 0.0));
+        ServoState {
+            mode: self.mode.code(),
+            flags: flag(self.tuning, STATE_TUNING)
+                | flag(self.force_control, STATE_FORCE_CONTROL)
+                | flag(self.force_armed, STATE_FORCE_ARMED)
+                | flag(self.safe.is_some(), STATE_SAFE)
+                | flag(self.resume_a_omega.is_some(), STATE_RESUME_A_OMEGA)
+                | flag(self.last_estimate.is_some(), STATE_LAST_ESTIMATE),
+            last_trigger: self.last_trigger.map_or(0, Trigger::code),
+            reserved: 0,
+            counters: [
+                n(c.started),
+                n(c.requested),
+                n(c.estimates),
+                n(c.reprobes),
+                n(c.failures),
+                n(c.force_triggers),
+                n(c.slope_triggers),
+                n(c.aborted),
+                n(c.safe_entries),
+                0,
+            ],
+            joints: self.pid.state(),
+            hybrid: self.hybrid.state(),
+            dither: self.dither.state(),
+            tuner: self.tuner.state(),
+            tare: [self.tare.force.x, self.tare.force.y, self.tare.torque],
+            last_q_d_rad: [self.last_q_d[0], self.last_q_d[1]],
+            resume_velocity_m_per_s: self.resume_velocity,
+            normal_filtered_n: self.normal_filtered,
+            odometer_m: [self.odometer, self.odometer_total],
+            last_estimate: [angle, at],
+            curvature_per_m: self.curvature,
+            curve_base_rad: self.curve_base,
+            drift_rad: self.drift,
+            stopped_settled_s: [self.stopped_s, self.settled_s],
+            normal_window: self.normal_window.summary(),
+            safe,
+            resume_a_omega_m_per_s: self.resume_a_omega.unwrap_or(0.0),
+            last_stroke_m: [
+                self.last_stroke.displacement.x,
+                self.last_stroke.displacement.y,
+            ],
+        }
+    }
+
+    /// Carries on from a state taken by [`ServoCore::state`] of a servo with the same settings
+    /// and start. A probe run in progress, or one whose estimate was awaited, starts again from
+    /// its beginning: its record is not in the state, and an answer to it would go to the
+    /// process that asked. Refuses (and changes nothing) a state with a non-finite number or an
+    /// unknown code.
+    pub fn restore(&mut self, st: &ServoState) -> Result<(), String> {
+        if !st.is_sane() {
+            return Err(
+                "the controller snapshot holds a non-finite value or an unknown code".into(),
+            );
+        }
+        let mode = ServoMode::from_code(st.mode).unwrap_or_default();
+        let has = |f: u32| st.flags & f != 0;
+        let c = st.counters.map(|v| v as usize);
+        self.counters = EstimationCounters {
+            started: c[0],
+            requested: c[1],
+            estimates: c[2],
+            reprobes: c[3],
+            failures: c[4],
+            force_triggers: c[5],
+            slope_triggers: c[6],
+            aborted: c[7],
+            safe_entries: c[8],
+        };
+        self.pid.restore(&st.joints);
+        self.hybrid.restore(&st.hybrid);
+        self.dither.restore(&st.dither);
+        self.tuner.restore(&st.tuner);
+        self.tuning = has(STATE_TUNING);
+        self.force_control = has(STATE_FORCE_CONTROL);
+        self.force_armed = has(STATE_FORCE_ARMED);
+        self.last_trigger = Trigger::from_code(st.last_trigger);
+        self.tare = Wrench {
+            force: Vec2::new(st.tare[0], st.tare[1]),
+            torque: st.tare[2],
+        };
+        self.last_q_d = Vector2::new(st.last_q_d_rad[0], st.last_q_d_rad[1]);
+        self.resume_velocity = st.resume_velocity_m_per_s;
+        self.normal_filtered = st.normal_filtered_n;
+        [self.odometer, self.odometer_total] = st.odometer_m;
+        self.last_estimate =
+            has(STATE_LAST_ESTIMATE).then_some((st.last_estimate[0], st.last_estimate[1]));
+        self.curvature = st.curvature_per_m;
+        self.curve_base = st.curve_base_rad;
+        self.drift = st.drift_rad;
+        [self.stopped_s, self.settled_s] = st.stopped_settled_s;
+        self.normal_window.refill(&st.normal_window);
+        self.safe = has(STATE_SAFE).then_some(SafeState {
+            resume_velocity: st.safe[0],
+            resume_a_omega: st.safe[1],
+            backoff_left: st.safe[2],
+            good_for_s: st.safe[3],
+        });
+        self.resume_a_omega = has(STATE_RESUME_A_OMEGA).then_some(st.resume_a_omega_m_per_s);
+        self.last_stroke = SetpointOffset::default();
+        self.probe.reset();
+        self.reprobe = false;
+        self.mode = mode;
+        if matches!(mode, ServoMode::Probing | ServoMode::AwaitingEstimate) {
+            // The arm stands where the last stroke took it: keep the set-point there, and probe
+            // again from the start (stop, settle, strokes).
+            if mode == ServoMode::Probing {
+                self.hybrid
+                    .absorb_offset(Vec2::new(st.last_stroke_m[0], st.last_stroke_m[1]));
+            }
+            self.stopped_s = 0.0;
+            self.settled_s = 0.0;
+            self.mode = ServoMode::Stopping;
+        }
+        Ok(())
+    }
+
     /// Starts a tangent estimation: stop, then probe (thesis §5.3.2). Ignored unless tracking.
     pub fn request_tangent_estimate(&mut self) {
         if self.mode == ServoMode::Track {
@@ -644,9 +961,10 @@ impl ServoCore {
     fn begin_estimation(&mut self, why: Trigger) {
         self.counters.started += 1;
         match why {
+            Trigger::Request => self.counters.requested += 1,
             Trigger::Force => self.counters.force_triggers += 1,
             Trigger::Slope => self.counters.slope_triggers += 1,
-            _ => {}
+            Trigger::Travel => {}
         }
         self.last_trigger = Some(why);
         self.stopped_s = 0.0;

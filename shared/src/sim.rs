@@ -120,6 +120,8 @@ pub struct Lockstep {
     plant: Plant,
     sensor: SensorModel,
     servo: ServoCore,
+    /// The servo as built, before its first tick: what a restarted servo starts from.
+    fresh: ServoCore,
     dt: f64,
     sensor_period: f64,
     ticks: u64,
@@ -161,6 +163,7 @@ impl Lockstep {
         Ok(Self {
             plant,
             sensor,
+            fresh: servo.clone(),
             servo,
             dt: cfg.servo.dt(),
             sensor_period: 1.0 / cfg.sensor.rate_hz,
@@ -215,6 +218,19 @@ impl Lockstep {
         };
         self.servo.apply_tangent_outcome(&outcome);
         self.estimates.push(log);
+    }
+
+    /// Replaces the servo by one built as the first was and given the old one's state
+    /// ([`ServoCore::state`], [`ServoCore::restore`]), as the stack's servo board does when
+    /// the supervisor restarts it: the lockstep goes through the same restart.
+    pub fn restart_servo(&mut self) -> Result<(), String> {
+        let state = self.servo.state();
+        let tare = self.servo.tare();
+        let mut servo = self.fresh.clone();
+        servo.restore(&state)?;
+        servo.set_tare(tare);
+        self.servo = servo;
+        Ok(())
     }
 
     /// Whether the in-process estimator answers probe runs (default true); off, the caller
@@ -280,6 +296,7 @@ impl Lockstep {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::servo::ServoMode;
 
     /// At rest in contact, the stack holds the preload: after 1 s the mean normal force is
     /// the preload within the sensor's noise, and the tool has not moved along the surface.
@@ -393,5 +410,128 @@ mod tests {
         a.run(3000);
         b.run(3000);
         assert_eq!(a.truth(), b.truth());
+    }
+
+    /// A servo restarted from its own state carries on bit for bit where nothing comes back in
+    /// brief: tracking with the cost tuner running (its period window is kept whole), at any
+    /// of several restart ticks, with the same world, torques and tuner as a servo that never
+    /// stopped. The state round-trips through the snapshot unchanged but for the moving
+    /// average of the normal force, which comes back in brief (its mean and variance, to
+    /// rounding).
+    #[test]
+    fn a_restarted_servo_carries_on_bit_for_bit() {
+        use crate::tuner::{CostTunerParams, TunerConfig};
+        let mut cfg = SimConfig::default();
+        cfg.servo.tuner = TunerConfig::Cost(CostTunerParams::default());
+        for restart_at in [1, 4_321, 12_345] {
+            let mut a = Lockstep::new(&cfg).unwrap();
+            let mut b = Lockstep::new(&cfg).unwrap();
+            for sim in [&mut a, &mut b] {
+                sim.servo_mut().hybrid_mut().set_velocity(0.01);
+                sim.servo_mut().set_a_omega(0.02);
+                sim.servo_mut().set_tuning(true);
+                sim.run(restart_at);
+            }
+            b.restart_servo().unwrap();
+            let (sa, mut sb) = (a.servo().state(), b.servo().state());
+            let (wa, wb) = (sa.normal_window, sb.normal_window);
+            assert_eq!(wa.len, wb.len);
+            assert!(
+                (wa.mean - wb.mean).abs() <= 1e-12 * wa.mean.abs(),
+                "{wa:?} {wb:?}"
+            );
+            assert!(
+                (wa.variance - wb.variance).abs() <= 1e-6 * wa.variance,
+                "{wa:?} {wb:?}"
+            );
+            sb.normal_window = wa;
+            assert_eq!(sa, sb, "restart at {restart_at}");
+            for k in 0..20_000 {
+                a.step();
+                b.step();
+                assert_eq!(
+                    a.truth(),
+                    b.truth(),
+                    "restart at {restart_at}, tick {k} after"
+                );
+                assert_eq!(a.servo().diag(), b.servo().diag());
+            }
+            assert_eq!(a.servo().tuner_report(), b.servo().tuner_report());
+        }
+    }
+
+    /// A servo restarted in the middle of its probe strokes (or while it awaits the estimate)
+    /// probes again from the start: it holds the stroke's set-point, stops, settles, strokes,
+    /// gets its estimate and tracks on; the normal force stays within 1.5× the preload
+    /// throughout, and the estimation counters carry on.
+    #[test]
+    fn a_servo_restarted_mid_probe_probes_again() {
+        let cfg = SimConfig {
+            tangent_error_rad: 3f64.to_radians(),
+            ..SimConfig::default()
+        };
+        let preload = cfg.servo.hybrid.preload_n;
+        for (mode, after) in [(ServoMode::Probing, 3_000), (ServoMode::Probing, 17_777)] {
+            let mut sim = Lockstep::new(&cfg).unwrap();
+            sim.set_auto_estimate(false);
+            sim.run(2000);
+            sim.servo_mut().request_tangent_estimate();
+            while sim.servo().mode() != mode {
+                sim.step();
+            }
+            sim.run(after);
+            assert_eq!(sim.servo().mode(), mode);
+            sim.restart_servo().unwrap();
+            assert_eq!(sim.servo().mode(), ServoMode::Stopping);
+            assert_eq!(sim.servo().counters().started, 1);
+            sim.set_auto_estimate(true);
+            let mut max = 0.0f64;
+            let mut n = 0;
+            while sim.estimates().is_empty() && n < 200_000 {
+                sim.step();
+                max = max.max(sim.truth().normal_force_n);
+                n += 1;
+            }
+            assert!(
+                max <= 1.5 * preload,
+                "normal force {max} N after the restart"
+            );
+            let log = sim.estimates()[0];
+            let TangentOutcome::Estimate(e) = log.outcome else {
+                panic!("{:?}", log.outcome)
+            };
+            assert!(
+                (e.tangent_angle_rad - log.true_angle_rad)
+                    .to_degrees()
+                    .abs()
+                    < 0.1
+            );
+            assert_eq!(sim.servo().counters().estimates, 1);
+        }
+        // Awaiting the estimate: the record is gone with the process; probe again.
+        let mut sim = Lockstep::new(&cfg).unwrap();
+        sim.set_auto_estimate(false);
+        sim.servo_mut().request_tangent_estimate();
+        while sim.servo().mode() != ServoMode::AwaitingEstimate {
+            sim.step();
+        }
+        sim.restart_servo().unwrap();
+        assert_eq!(sim.servo().mode(), ServoMode::Stopping);
+    }
+
+    /// A snapshot with a non-finite number is refused and changes nothing.
+    #[test]
+    fn an_insane_snapshot_is_refused() {
+        let cfg = SimConfig::default();
+        let mut sim = Lockstep::new(&cfg).unwrap();
+        sim.run(100);
+        let before = sim.servo().state();
+        let mut bad = before;
+        bad.hybrid.depth_m = f64::NAN;
+        assert!(sim.servo_mut().restore(&bad).is_err());
+        bad = before;
+        bad.mode = 9;
+        assert!(sim.servo_mut().restore(&bad).is_err());
+        assert_eq!(sim.servo().state(), before);
     }
 }

@@ -24,8 +24,29 @@
 
 use crate::friction::FrictionLaw;
 use crate::math::grid_then_golden;
-use crate::window::{PeriodStats, PeriodWindow, SlidingWindow};
+use crate::window::{PeriodStats, PeriodWindow, PeriodWindowState, SlidingSummary, SlidingWindow};
+use iceoryx2_bb_derive_macros::ZeroCopySend;
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::{Deserialize, Serialize};
+
+/// A [`Tuner`]'s state, for a snapshot (the fields of the configured tuner; the others 0).
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+#[type_name("afs::TunerState")]
+#[repr(C)]
+pub struct TunerState {
+    /// Aω (m/s).
+    pub a_omega_m_per_s: f64,
+    /// Thesis tuner: the Stribeck velocity estimate (m/s).
+    pub stribeck_velocity_estimate_m_per_s: f64,
+    /// Cost tuner: the measured dither transmission.
+    pub transmission: f64,
+    /// Cost tuner: the friction-level correction.
+    pub friction_scale: f64,
+    /// Thesis tuner: its friction window, in brief.
+    pub window: SlidingSummary,
+    /// Cost tuner: its period window.
+    pub periods: PeriodWindowState,
+}
 
 /// Settings of the thesis tuner (a).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -475,6 +496,48 @@ impl Tuner {
             Tuner::Fixed(x) => *x = a,
             Tuner::Thesis(t) => t.a = a,
             Tuner::Cost(t) => t.a = a,
+        }
+    }
+
+    /// Its state.
+    pub fn state(&self) -> TunerState {
+        match self {
+            Tuner::Fixed(a) => TunerState {
+                a_omega_m_per_s: *a,
+                ..Default::default()
+            },
+            Tuner::Thesis(t) => TunerState {
+                a_omega_m_per_s: t.a,
+                stribeck_velocity_estimate_m_per_s: t.xs_hat,
+                window: t.window.summary(),
+                ..Default::default()
+            },
+            Tuner::Cost(t) => TunerState {
+                a_omega_m_per_s: t.a,
+                transmission: t.transmission,
+                friction_scale: t.scale,
+                periods: t.window.state(),
+                ..Default::default()
+            },
+        }
+    }
+
+    /// Restores a state taken by [`Tuner::state`] of a tuner of the same kind (the thesis
+    /// tuner's window comes back in brief, [`SlidingWindow::refill`]).
+    pub fn restore(&mut self, s: &TunerState) {
+        match self {
+            Tuner::Fixed(a) => *a = s.a_omega_m_per_s,
+            Tuner::Thesis(t) => {
+                t.a = s.a_omega_m_per_s;
+                t.xs_hat = s.stribeck_velocity_estimate_m_per_s;
+                t.window.refill(&s.window);
+            }
+            Tuner::Cost(t) => {
+                t.a = s.a_omega_m_per_s;
+                t.transmission = s.transmission;
+                t.scale = s.friction_scale;
+                t.window.restore(&s.periods);
+            }
         }
     }
 

@@ -7,7 +7,44 @@
 //!   saw) and the dither velocity amplitude by lock-in demodulation against the dither phase
 //!   (the Aω the contact actually saw).
 
+use iceoryx2_bb_derive_macros::ZeroCopySend;
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
+
+/// A [`SlidingWindow`] in brief, for a snapshot: how many samples it holds, their mean and
+/// their variance. Restoring refills the window with samples of that mean and (nearly) that
+/// variance, so both carry on and the samples themselves are forgotten: they are replaced as
+/// new ones come, one window later.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+#[type_name("afs::SlidingSummary")]
+#[repr(C)]
+pub struct SlidingSummary {
+    /// Samples held.
+    pub len: u64,
+    /// Their mean.
+    pub mean: f64,
+    /// Their variance.
+    pub variance: f64,
+}
+
+/// The sums of one dither period of a [`PeriodWindow`], in the order of its fields (samples,
+/// force, force², velocity, velocity·cos φ, velocity·sin φ, normal force, commanded Aω).
+pub type PeriodSumsState = [f64; 8];
+
+/// A [`PeriodWindow`]'s whole state, for a snapshot.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+#[type_name("afs::PeriodWindowState")]
+#[repr(C)]
+pub struct PeriodWindowState {
+    /// The period in progress.
+    pub current: PeriodSumsState,
+    /// The finished periods (ring).
+    pub ring: [PeriodSumsState; MAX_PERIODS],
+    /// Finished periods held.
+    pub filled: u32,
+    /// Next ring slot.
+    pub head: u32,
+}
 
 /// Mean and variance over the last `capacity` samples.
 #[derive(Debug, Clone)]
@@ -92,6 +129,43 @@ impl SlidingWindow {
         }
     }
 
+    /// Its count, mean and variance ([`SlidingSummary`]).
+    pub fn summary(&self) -> SlidingSummary {
+        SlidingSummary {
+            len: self.len as u64,
+            mean: self.mean(),
+            variance: self.variance(),
+        }
+    }
+
+    /// Refills the window from a summary: `len` samples (at most its capacity) alternating
+    /// `mean ± σ`, and `mean` itself for an odd count, so the mean is exact and the variance
+    /// is `σ²` (`σ²·(len−1)/len` for an odd count). Non-finite values empty it.
+    pub fn refill(&mut self, s: &SlidingSummary) {
+        let cap = self.buf.len();
+        let len = usize::try_from(s.len).unwrap_or(cap).min(cap);
+        self.buf.iter_mut().for_each(|v| *v = 0.0);
+        self.len = 0;
+        self.head = 0;
+        self.sum = 0.0;
+        self.sum2 = 0.0;
+        self.since_recompute = 0;
+        if !(s.mean.is_finite() && s.variance.is_finite()) {
+            return;
+        }
+        let sd = s.variance.max(0.0).sqrt();
+        for i in 0..len {
+            let x = if len % 2 == 1 && i == len - 1 {
+                s.mean
+            } else if i % 2 == 0 {
+                s.mean + sd
+            } else {
+                s.mean - sd
+            };
+            self.push(x);
+        }
+    }
+
     /// Population variance (0 when empty).
     pub fn variance(&self) -> f64 {
         if self.len == 0 {
@@ -115,6 +189,33 @@ struct PeriodSums {
 }
 
 impl PeriodSums {
+    fn to_array(self) -> PeriodSumsState {
+        [
+            self.n,
+            self.f,
+            self.f2,
+            self.v,
+            self.v_cos,
+            self.v_sin,
+            self.normal,
+            self.a_cmd,
+        ]
+    }
+
+    fn from_array(a: &PeriodSumsState) -> Self {
+        let [n, f, f2, v, v_cos, v_sin, normal, a_cmd] = *a;
+        Self {
+            n,
+            f,
+            f2,
+            v,
+            v_cos,
+            v_sin,
+            normal,
+            a_cmd,
+        }
+    }
+
     fn add(&mut self, o: &PeriodSums) {
         self.n += o.n;
         self.f += o.f;
@@ -221,6 +322,24 @@ impl PeriodWindow {
     pub fn reset(&mut self) {
         *self = Self::new(self.periods);
     }
+
+    /// Its whole state.
+    pub fn state(&self) -> PeriodWindowState {
+        PeriodWindowState {
+            current: self.current.to_array(),
+            ring: self.ring.map(|p| p.to_array()),
+            filled: self.filled as u32,
+            head: self.head as u32,
+        }
+    }
+
+    /// Restores a state taken by [`PeriodWindow::state`] of a window with as many periods.
+    pub fn restore(&mut self, s: &PeriodWindowState) {
+        self.current = PeriodSums::from_array(&s.current);
+        self.ring = s.ring.map(|p| PeriodSums::from_array(&p));
+        self.filled = (s.filled as usize).min(self.periods);
+        self.head = (s.head as usize) % self.periods;
+    }
 }
 
 #[cfg(test)]
@@ -267,5 +386,73 @@ mod tests {
         assert!((s.mean_force_n - 1.0).abs() < 1e-12);
         assert!((s.std_force_n - 0.5f64.sqrt()).abs() < 1e-12);
         assert_eq!(s.samples, 2 * n);
+    }
+
+    /// A refilled window has the summary's mean exactly and its variance (even count) or
+    /// (n−1)/n of it (odd count); it holds at most its capacity; a non-finite summary empties it.
+    #[test]
+    fn a_refilled_window_keeps_mean_and_variance() {
+        let mut w = SlidingWindow::new(40);
+        for i in 0..57 {
+            w.push((i as f64 * 0.37).sin() * 2.0 + 1.0);
+        }
+        for n in [40u64, 7, 1, 0] {
+            let s = SlidingSummary {
+                len: n,
+                ..w.summary()
+            };
+            let mut r = SlidingWindow::new(40);
+            r.refill(&s);
+            assert_eq!(r.len() as u64, n);
+            if n > 0 {
+                assert!((r.mean() - s.mean).abs() < 1e-12, "{n}");
+                let expected = if n % 2 == 0 {
+                    s.variance
+                } else {
+                    s.variance * (n - 1) as f64 / n as f64
+                };
+                assert!((r.variance() - expected).abs() < 1e-12, "{n}");
+            }
+        }
+        let mut r = SlidingWindow::new(10);
+        r.refill(&SlidingSummary {
+            len: 1000,
+            mean: 3.0,
+            variance: 4.0,
+        });
+        assert_eq!(r.len(), 10);
+        assert!((r.variance() - 4.0).abs() < 1e-12);
+        r.refill(&SlidingSummary {
+            len: 5,
+            mean: f64::NAN,
+            variance: 1.0,
+        });
+        assert!(r.is_empty());
+    }
+
+    /// A period window restored from its state gives the same statistics from then on.
+    #[test]
+    fn a_period_window_round_trips() {
+        let mut a = PeriodWindow::new(3);
+        let feed = |w: &mut PeriodWindow, k: usize| {
+            let phase = (k % 100) as f64 * std::f64::consts::TAU / 100.0;
+            w.push(
+                (k as f64).sin(),
+                0.01 + 0.02 * phase.cos(),
+                phase,
+                2.5,
+                0.02,
+            );
+            (k % 100 == 99).then(|| w.end_period()).flatten()
+        };
+        for k in 0..450 {
+            feed(&mut a, k);
+        }
+        let mut b = PeriodWindow::new(3);
+        b.restore(&a.state());
+        assert_eq!(a.state(), b.state());
+        for k in 450..1000 {
+            assert_eq!(feed(&mut a, k), feed(&mut b, k), "{k}");
+        }
     }
 }
