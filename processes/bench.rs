@@ -713,7 +713,7 @@ fn hop(opts: &BenchOptions, stop: &AtomicBool) -> Result<Value> {
         .map_err(|_| anyhow::anyhow!("the hop thread panicked"))?
     });
     let _ = std::fs::remove_dir_all(&dir);
-    let _ = ipc::remove_leftovers(&prefix);
+    let _ = ipc::release_prefix(&prefix);
     result
 }
 

@@ -587,13 +587,14 @@ mod tests {
         assert!(!r.thawed);
         assert!(r.note.contains("cut 1 probe(s) short"), "{}", r.note);
         drop((inj, service, node));
-        // The domain's node-id segment outlives its nodes by design; the rest went with them.
-        let removed = ipc::remove_leftovers(&prefix).unwrap();
-        assert!(removed.is_empty(), "{removed:?}");
+        // Everything went with the node but the domain's node counter, which the release
+        // removes.
         assert!(
-            ipc::leftovers(&prefix).is_empty(),
-            "{:?}",
             ipc::leftovers(&prefix)
+                .iter()
+                .all(|f| ipc::is_node_counter(f))
         );
+        let left = ipc::release_prefix(&prefix).unwrap();
+        assert!(left.is_empty(), "{left:?}");
     }
 }

@@ -289,7 +289,9 @@ pub struct NodeCensus {
 }
 
 /// Takes `prefix` for a new stack (or benchmark): refuses it while any of its nodes is alive,
-/// and otherwise removes what dead ones left. Returns (dead nodes cleaned, files removed).
+/// and otherwise removes what dead ones left ([`release_prefix`]), then, as a last resort, any
+/// file of the prefix iceoryx2 could not remove (no live node can be using it). Returns (dead
+/// nodes cleaned, files removed by name).
 pub fn claim_prefix(prefix: &str) -> Result<(usize, usize)> {
     let census = census(prefix, true)?;
     if !census.alive.is_empty() {
@@ -303,8 +305,24 @@ pub fn claim_prefix(prefix: &str) -> Result<(usize, usize)> {
                 .join(", ")
         );
     }
-    let stale = remove_leftovers(prefix)?;
-    Ok((census.cleaned, stale.len()))
+    Ok((census.cleaned, clear_prefix(prefix)?.len()))
+}
+
+/// [`release_prefix`], then removes by name what is still left (a dead stack's files iceoryx2
+/// could not remove; with no node of the prefix alive nothing uses them). Returns what was
+/// removed by name.
+pub fn clear_prefix(prefix: &str) -> Result<Vec<PathBuf>> {
+    let left = release_prefix(prefix)?;
+    Ok(left
+        .into_iter()
+        .filter(|f| {
+            if f.is_dir() {
+                std::fs::remove_dir_all(f).is_ok()
+            } else {
+                std::fs::remove_file(f).is_ok()
+            }
+        })
+        .collect())
 }
 
 /// Lists the nodes of stack `prefix`; with `clean`, removes the resources of dead ones.
@@ -468,14 +486,18 @@ fn scan(dir: &Path, prefix: &str, out: &mut Vec<PathBuf>, depth: usize) {
     }
 }
 
-/// Removes whatever of stack `prefix` is left after its nodes are gone: first through
-/// iceoryx2's dead-node clean-up, then any file still carrying the prefix. Returns what had to
-/// be removed by name (which iceoryx2 could not).
-pub fn remove_leftovers(prefix: &str) -> Result<Vec<PathBuf>> {
+/// Releases stack `prefix` once its nodes are gone: iceoryx2's dead-node clean-up removes
+/// what dead nodes held (their nodes, ports, connections, and services no node uses any more),
+/// and the one file iceoryx2 keeps by design, the domain's node counter
+/// ([`is_node_counter`]), is removed by name: it holds no state a later process needs (node
+/// ids are unique by pid and creation time, docs/reliability.md). Refuses while a node of the
+/// stack is alive. Returns the files of the prefix still left: a leak, for the caller to
+/// report.
+pub fn release_prefix(prefix: &str) -> Result<Vec<PathBuf>> {
     let c = census(prefix, true).context("cleaning dead nodes")?;
     if !c.alive.is_empty() {
         bail!(
-            "stack '{prefix}' still has live nodes ({}); not removing its files",
+            "stack '{prefix}' still has live nodes ({}); not releasing it",
             c.alive
                 .iter()
                 .map(|(n, p)| format!("{n} pid {p}"))
@@ -483,23 +505,17 @@ pub fn remove_leftovers(prefix: &str) -> Result<Vec<PathBuf>> {
                 .join(", ")
         );
     }
-    // The node-id counter segment is shared by every node of the domain and persists by
-    // design; with no node of the stack alive it can go.
-    if let Ok(cfg) = config(prefix) {
-        // SAFETY: no process uses this stack's domain any more (census above found none).
-        let _ = unsafe { iceoryx2::testing::remove_global_mgmt_segment::<Svc>(&cfg) };
+    for f in leftovers(prefix).iter().filter(|f| is_node_counter(f)) {
+        let _ = std::fs::remove_file(f);
     }
-    let left = leftovers(prefix);
-    let mut removed = Vec::new();
-    for f in &left {
-        let r = if f.is_dir() {
-            std::fs::remove_dir_all(f)
-        } else {
-            std::fs::remove_file(f)
-        };
-        if r.is_ok() {
-            removed.push(f.clone());
-        }
-    }
-    Ok(removed)
+    Ok(leftovers(prefix))
+}
+
+/// True for the domain's node-counter segment (`…node….global_mgmt` in /dev/shm): created by
+/// the first node of a prefix and kept by iceoryx2 when the last one goes.
+pub fn is_node_counter(f: &Path) -> bool {
+    let suffix = iceoryx2::config::Node::default().global_mgmt_suffix;
+    f.file_name()
+        .and_then(|n| n.to_str())
+        .is_some_and(|n| n.ends_with(&suffix.to_string()))
 }

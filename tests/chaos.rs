@@ -1,6 +1,13 @@
 //! Fault injection on the real binaries (`afs chaos`, and signals sent by the test itself):
 //! killed and frozen boards, bad force samples, a killed supervisor, a 50-kill soak. Each test
 //! has its own prefix and leaves none of its shared memory behind; none asserts a run time.
+//!
+//! The tests assert mechanisms and correctness: every planned fault injected, every faulted
+//! board back, nothing lost or reordered, no leak, counters equal, agreement with the lockstep
+//! reference. The report's targets (safe within 2 ms, a sensor back within 500 ms, the normal
+//! force within 2× the preload) are figures a loaded or stalled machine can miss: `afs chaos`
+//! reports them and docs/reliability.md gives their distribution; here a time is only bounded
+//! relative to the configured policy with an allowance a stalled VM cannot use up.
 
 use serde_json::Value;
 use std::process::Output;
@@ -20,17 +27,54 @@ fn chaos(p: &str, args: &[&str]) -> (Output, Value) {
     (out, r)
 }
 
-fn assert_passed(out: &Output, r: &Value) {
+/// Every correctness check passed (the targets may be missed on a loaded machine: then the run
+/// exits with 1, and that is all a missed target may change).
+fn assert_correct(out: &Output, r: &Value) {
     let failed: Vec<&Value> = r["checks"]
         .as_array()
         .unwrap()
         .iter()
-        .filter(|c| c["pass"] != true)
+        .filter(|c| c["pass"] != true && c["kind"] != "target")
         .collect();
+    let all_targets_met = r["checks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .all(|c| c["pass"] == true || c["kind"] != "target");
+    let code = out.status.code();
+    assert!(
+        failed.is_empty() && (code == Some(0) || (code == Some(1) && !all_targets_met)),
+        "failed checks: {failed:?} (exit {code:?})\nstderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// `afs run` has no targets: every check must pass.
+fn assert_passed(out: &Output, r: &Value) {
+    assert_correct(out, r);
     assert!(
         out.status.success() && r["passed"] == true,
-        "failed checks: {failed:?}\nstderr: {}",
-        String::from_utf8_lossy(&out.stderr)
+        "{}",
+        r["checks"]
+    );
+}
+
+/// Time a restarted board may take beyond its backoff in these tests (ms): restarts take
+/// 20–90 ms beyond it on an idle machine (docs/reliability.md); the allowance is for a VM that
+/// stalls or a CI machine that is busy.
+const RESTART_ALLOWANCE_MS: f64 = 3000.0;
+
+/// Allowance over the servo's force-age limit (1.5 ms) for going safe in these tests (ms).
+const SAFE_ALLOWANCE_MS: f64 = 10.0;
+
+/// The fault came back within its backoff plus [`RESTART_ALLOWANCE_MS`].
+fn assert_back_in_time(fault: &Value) {
+    let backoff = f(&fault["restart"]["backoff_ms"]);
+    let back = f(&fault["back_ms"]);
+    let detected = fault["detected_ms"].as_f64().unwrap_or(0.0);
+    assert!(
+        back <= detected + backoff + RESTART_ALLOWANCE_MS,
+        "back after {back} ms (backoff {backoff} ms): {fault}"
     );
 }
 
@@ -56,10 +100,11 @@ fn f(v: &Value) -> f64 {
     v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
 }
 
-/// The sensor killed at a random moment, killed while the servo dithers to probe, and frozen:
-/// each time the servo is safe within 2 ms of the last good sample (when it itself ran on
-/// time), the normal force stays under 2× the preload, a killed sensor's data is back within
-/// 500 ms, the frozen one is found by the stall policy and replaced, and the scenario passes.
+/// The sensor killed at a random moment, killed while the servo dithers to probe (it asks for
+/// the probe), and frozen: each time the servo goes safe (when it itself ran on time) within
+/// its force-age limit plus an allowance, the normal force stays bounded, a killed sensor's
+/// data is back within its backoff plus an allowance, the frozen one is found by the stall
+/// policy and replaced, and the scenario agrees with its lockstep reference.
 #[test]
 fn sensor_killed_or_frozen_the_servo_stays_safe_and_recovers() {
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
@@ -78,7 +123,7 @@ fn sensor_killed_or_frozen_the_servo_stays_safe_and_recovers() {
             "--in-turn",
         ],
     );
-    assert_passed(&out, &r);
+    assert_correct(&out, &r);
     assert_eq!(r["chaos"]["injected"], 3);
     let fl = &r["faults"];
     // Every fault sends the servo to its safe state; entries where the machine stalled the
@@ -86,18 +131,26 @@ fn sensor_killed_or_frozen_the_servo_stays_safe_and_recovers() {
     let on_time =
         fl["safe_entries"].as_u64().unwrap() - fl["safe_entries_servo_stalled"].as_u64().unwrap();
     assert!(on_time >= 1, "{fl}");
-    assert!(f(&fl["safe_after_last_good_ms_max"]) <= 2.0, "{fl}");
-    assert!(f(&fl["normal_force_max_over_preload"]) <= 2.0, "{fl}");
-    for kind in ["kill-sensor", "kill-sensor-mid-probe"] {
+    assert!(
+        f(&fl["safe_after_last_good_ms_max"]) <= 1.5 + SAFE_ALLOWANCE_MS,
+        "{fl}"
+    );
+    assert!(f(&fl["normal_force_max_over_preload"]) <= 3.0, "{fl}");
+    for kind in ["kill-sensor", "kill-sensor-mid-probe", "freeze-sensor"] {
         let k = faults_of(&r, kind);
         assert_eq!(k.len(), 1, "{kind}");
-        assert!(f(&k[0]["back_ms"]) <= 500.0, "{kind}: {}", k[0]);
+        assert_back_in_time(k[0]);
     }
     let mid = faults_of(&r, "kill-sensor-mid-probe")[0];
-    assert_eq!(mid["servo_mode"], 2, "not killed while probing: {mid}");
+    assert_eq!(
+        mid["servo_mode"], "probing",
+        "not killed while probing: {mid}"
+    );
     let frozen = faults_of(&r, "freeze-sensor")[0];
-    assert!(frozen["detected_ms"].as_f64().is_some(), "{frozen}");
-    assert!(frozen["back_ms"].as_f64().is_some(), "{frozen}");
+    assert!(
+        f(&frozen["detected_ms"]) >= 100.0,
+        "before the stall limit: {frozen}"
+    );
     let sensor = process(&r, "sensor");
     assert_eq!(sensor["restarts"], 3);
     assert_eq!(sensor["stalls_killed"], 1);
@@ -126,9 +179,12 @@ fn estimator_killed_mid_request_answers_after_the_restart() {
             "--in-turn",
         ],
     );
-    assert_passed(&out, &r);
+    assert_correct(&out, &r);
     let mid = faults_of(&r, "kill-estimator-mid-request")[0];
-    assert_eq!(mid["servo_mode"], 3, "not killed mid-request: {mid}");
+    assert_eq!(
+        mid["servo_mode"], "awaiting_estimate",
+        "not killed mid-request: {mid}"
+    );
     // A probe the servo cut short (a VM stall put it in its safe state) sends no request: the
     // injector lets the estimator go and waits for the next probe, noting it; never thawed.
     assert_eq!(mid["thawed"], false, "{mid}");
@@ -173,7 +229,7 @@ fn bad_samples_are_counted_and_never_reach_the_controller() {
             "bad-samples",
         ],
     );
-    assert_passed(&out, &r);
+    assert_correct(&out, &r);
     let sent = &r["chaos"]["bad_samples"]["sent"];
     for k in ["nan", "infinite", "absurd", "repeat", "backwards", "future"] {
         assert_eq!(sent[k], 5, "{k}: {sent}");
@@ -241,6 +297,66 @@ fn a_killed_supervisor_takes_its_boards_and_the_next_run_cleans_up() {
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
 }
 
+/// The servo killed, frozen (SIGSTOP) and killed mid-probe: the stall policy finds the frozen
+/// one, every restarted servo resumes the world and its controller (every tick of the run
+/// exactly once, the normal force bounded right after each restart, the probe cut by the
+/// restart run again), and the lockstep reference, restarted at the same ticks, agrees.
+#[test]
+fn servo_killed_or_frozen_resumes_the_world_and_its_controller() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let p = prefix("srv");
+    let (out, r) = chaos(
+        &p,
+        &[
+            "--scenario",
+            "surface-tracking",
+            "--duration",
+            "10",
+            "--kills",
+            "3",
+            "--faults",
+            "kill-servo,freeze-servo,kill-servo-mid-probe",
+            "--in-turn",
+        ],
+    );
+    assert_correct(&out, &r);
+    assert_eq!(r["chaos"]["injected"], 3);
+    for kind in ["kill-servo", "freeze-servo", "kill-servo-mid-probe"] {
+        let k = faults_of(&r, kind);
+        assert_eq!(k.len(), 1, "{kind}");
+        assert_back_in_time(k[0]);
+    }
+    let frozen = faults_of(&r, "freeze-servo")[0];
+    assert!(
+        f(&frozen["detected_ms"]) >= 500.0,
+        "before the stall limit: {frozen}"
+    );
+    let mid = faults_of(&r, "kill-servo-mid-probe")[0];
+    assert_eq!(
+        mid["servo_mode"], "probing",
+        "not killed while probing: {mid}"
+    );
+    let servo = process(&r, "servo");
+    assert_eq!(servo["restarts"], 3);
+    assert_eq!(servo["stalls_killed"], 1);
+    let s = &r["samples"];
+    assert_eq!(s["plant_received"], 100_001, "{s}");
+    assert_eq!(s["plant_lost"], 0, "{s}");
+    assert_eq!(s["reordered"], 0, "{s}");
+    // Resumed, not restarted afresh: no transient of a controller that forgot its state.
+    let preload = 2.5;
+    assert!(
+        f(&r["faults"]["normal_force_max_after_servo_restart_n"]) <= 2.0 * preload,
+        "{}",
+        r["faults"]
+    );
+    // The probe cut by the kill ran again from its start.
+    let e = &r["stack"]["tracking"]["estimations"];
+    assert!(e["started"].as_u64().unwrap() >= 1, "{e}");
+    assert_eq!(r["agreement"]["agrees"], true, "{}", r["agreement"]);
+    assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
+}
+
 /// 50 random SIGKILLs of servo, sensor and estimator over 2 simulated minutes: every fault
 /// recovered, the world resumed each time (every tick once, none lost or reordered, at most
 /// one servo sample lost per servo kill), no file of a dead process left in /dev/shm, the
@@ -264,9 +380,12 @@ fn soak_fifty_random_kills() {
             "kill-servo,kill-sensor,kill-estimator",
         ],
     );
-    assert_passed(&out, &r);
+    assert_correct(&out, &r);
     let c = &r["chaos"];
     assert_eq!(c["injected"], 50);
+    for fault in c["faults"].as_array().unwrap() {
+        assert_back_in_time(fault);
+    }
     let s = &r["samples"];
     assert_eq!(s["plant_received"], 1_200_001, "{s}");
     assert_eq!(s["plant_lost"], 0, "{s}");
@@ -297,7 +416,7 @@ fn soak_fifty_random_kills() {
 /// Bad `afs chaos` input: a clear message and exit status 2, never a panic or a hang.
 #[test]
 fn bad_chaos_input_is_refused_clearly() {
-    let cases: [(&[&str], &str); 5] = [
+    let cases: [(&[&str], &str); 8] = [
         (&["chaos", "--faults", "kill-everything"], "unknown fault"),
         (&["chaos", "--kills", "100000"], "too many"),
         (
@@ -306,6 +425,34 @@ fn bad_chaos_input_is_refused_clearly() {
         ),
         (&["chaos", "--duration=-1"], "must be"),
         (&["chaos", "--kills", "-3"], "unexpected argument '-3'"),
+        // Three mid-request kills need three whole probe runs: refused up front, naming the
+        // shortest run that holds them.
+        (
+            &[
+                "chaos",
+                "--duration",
+                "20",
+                "--kills",
+                "3",
+                "--faults",
+                "kill-estimator-mid-request",
+            ],
+            "use a duration of at least 36 s",
+        ),
+        (
+            &["chaos", "--duration", "5", "--kills", "100"],
+            "or fewer faults",
+        ),
+        (
+            &[
+                "chaos",
+                "--scenario",
+                "friction-id",
+                "--faults",
+                "kill-sensor-mid-probe",
+            ],
+            "needs a scenario that probes the tangent",
+        ),
     ];
     for (args, needle) in cases {
         let out = afs()

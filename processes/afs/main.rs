@@ -373,8 +373,13 @@ fn print_checks(r: &serde_json::Value) {
     };
     for c in r["checks"].as_array().into_iter().flatten() {
         say!(
-            "  [{}] {}: {} {} {}",
+            "  [{}] {}{}: {} {} {}",
             if c["pass"] == true { "ok" } else { "FAIL" },
+            if c["kind"] == "target" {
+                "(target) "
+            } else {
+                ""
+            },
             c["name"].as_str().unwrap_or(""),
             num(&c["value"]),
             c["relation"].as_str().unwrap_or(""),
@@ -517,12 +522,13 @@ fn print_run(r: &serde_json::Value) {
     }
     if let Some(c) = r["chaos"].as_object() {
         say!(
-            "  faults: {} of {} injected; back after a kill (max ms): servo {}, sensor {}, estimator {}",
+            "  faults: {} of {} injected; back after a kill (max ms): servo {}, sensor {}, estimator {}; beyond the backoff at most {} ms",
             c["injected"],
             c["planned"],
             c["back_after_kill"]["servo"]["max_ms"],
             c["back_after_kill"]["sensor"]["max_ms"],
             c["back_after_kill"]["estimator"]["max_ms"],
+            c["back_beyond_backoff_ms_max"],
         );
     }
     let fl = &r["faults"];

@@ -128,7 +128,7 @@ pub struct CleanPrefix(pub String);
 
 impl Drop for CleanPrefix {
     fn drop(&mut self) {
-        let _ = afs::ipc::remove_leftovers(&self.0);
+        let _ = afs::ipc::clear_prefix(&self.0);
     }
 }
 
