@@ -54,7 +54,8 @@ pub struct BoardView {
     /// Its pid (0: none running).
     pub pid: i32,
     /// When the current process's data started to flow (sensor: its first wrench sample;
-    /// servo: its first world sample; estimator: its ports open, from its start-up report).
+    /// servo: its first world tick, a restarted one's first new tick; estimator: its ports
+    /// open, from its start-up report).
     pub data_since: Option<Instant>,
     /// The supervisor kills it when silent (`stall_ms` > 0).
     pub stall_policy: bool,

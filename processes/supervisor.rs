@@ -1482,6 +1482,8 @@ fn supervise(
     let mut last_friction_at = Instant::now();
     let mut last_time_s = 0.0f64;
     let mut servo_view = ServoView::default();
+    // The first tick of a restarted servo (None until its first sample arrives).
+    let mut servo_resumes_at: Option<u64> = None;
     let mut command_seq = 0u64;
     let mut genuine: Option<WrenchSample> = None;
     // Wall-clock limit: the simulated duration plus generous start-up and restart slack.
@@ -1500,12 +1502,19 @@ fn supervise(
                 && sv.data_since.is_none()
                 && sv.state == ProcState::Running
             {
-                sv.data_flowing(last_plant_at, rt::monotonic_ns());
                 // A restarted servo's first sample is its predecessor's last tick again (from
-                // the snapshot it resumes): its own ticks start at the next one.
-                if sv.restarts > 0 {
-                    out.faults.servo_restarted_at(p.seq + 1);
-                    out.monitor.servo_restarted_at(p.seq + 1);
+                // the snapshot it resumes): its own ticks, and the world going on, start at the
+                // next one.
+                let flowing = sv.restarts == 0 || {
+                    let first = *servo_resumes_at.get_or_insert_with(|| {
+                        out.faults.servo_restarted_at(p.seq + 1);
+                        out.monitor.servo_restarted_at(p.seq + 1);
+                        p.seq + 1
+                    });
+                    p.seq >= first
+                };
+                if flowing {
+                    sv.data_flowing(last_plant_at, rt::monotonic_ns());
                 }
             }
             if out.joiner.is_repeat(&p) {
@@ -1740,6 +1749,9 @@ fn supervise(
                 p.restarts += 1;
                 p.restart_at = None;
                 let resume = p.spec.name == "servo";
+                if resume {
+                    servo_resumes_at = None;
+                }
                 if let Err(e) = p.spawn(launch, resume) {
                     eprintln!("afs: restarting {}: {e:#}", p.spec.name);
                     p.state = ProcState::Failed;

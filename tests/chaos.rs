@@ -253,8 +253,8 @@ fn bad_samples_are_counted_and_never_reach_the_controller() {
 fn a_killed_supervisor_takes_its_boards_and_the_next_run_cleans_up() {
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let p = prefix("sup");
-    let mut run = start_run(&p, &["--duration", "60"]);
     let _clean = CleanPrefix(p.clone());
+    let mut run = start_run(&p, &["--duration", "60"]);
     wait_running(&p, Duration::from_secs(60));
     let boards: Vec<i32> = ["servo", "sensor", "estimator"]
         .iter()

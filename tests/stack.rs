@@ -68,6 +68,7 @@ fn a_running_stack_serves_clients_and_keeps_its_prefix() {
     let dir = std::env::temp_dir().join(format!("afs-test-{p}"));
     std::fs::create_dir_all(&dir).unwrap();
     let rec = dir.join("run.mcap");
+    let _clean = (CleanPrefix(p.clone()), CleanPrefix(q.clone()));
     let run = start_run(
         &p,
         &[
@@ -208,6 +209,7 @@ fn a_running_stack_serves_clients_and_keeps_its_prefix() {
 fn ctrl_c_stops_the_stack_and_cleans_up() {
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let p = prefix("cc");
+    let _clean = CleanPrefix(p.clone());
     let run = start_run(&p, &["--duration", "60"]);
     wait_running(&p, Duration::from_secs(20));
     // SAFETY: signalling our own child.
@@ -480,6 +482,7 @@ fn the_estimator_board_answers_requests() {
 fn killed_boards_are_restarted_and_the_world_resumes() {
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let p = prefix("kill");
+    let _clean = CleanPrefix(p.clone());
     let run = start_run(&p, &["--scenario", "surface-tracking", "--duration", "12"]);
     wait_running(&p, Duration::from_secs(60));
     for board in ["sensor", "servo"] {

@@ -122,13 +122,18 @@ impl Drop for KillOnDrop {
     }
 }
 
-/// Removes a prefix's iceoryx2 files when dropped, also when a failed assertion unwinds (the
-/// test's own node leaves the domain's files behind).
+/// Removes a prefix's iceoryx2 files when dropped, also when a failed assertion unwinds past a
+/// killed stack (declare it before the stack's [`KillOnDrop`], so it drops after it).
 pub struct CleanPrefix(pub String);
 
 impl Drop for CleanPrefix {
     fn drop(&mut self) {
-        let _ = afs::ipc::clear_prefix(&self.0);
+        // The boards of a killed supervisor follow it (SIGTERM from the kernel) within moments;
+        // the prefix is cleared once none of its nodes is alive.
+        let t0 = Instant::now();
+        while afs::ipc::clear_prefix(&self.0).is_err() && t0.elapsed() < Duration::from_secs(10) {
+            std::thread::sleep(Duration::from_millis(100));
+        }
     }
 }
 
