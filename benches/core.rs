@@ -45,6 +45,11 @@ fn benches(c: &mut Criterion) {
         b.iter(|| black_box(servo.step(black_box(&input), 1e-4)))
     });
 
+    // What the servo board writes to the world blackboard every tick besides the plant.
+    c.bench_function("servo_state_snapshot", |b| {
+        b.iter(|| black_box(black_box(&servo).state()))
+    });
+
     let mut stepping = running_sim();
     c.bench_function("lockstep_step", |b| b.iter(|| stepping.step()));
 

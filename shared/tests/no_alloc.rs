@@ -1,5 +1,6 @@
 //! One plant + sensor + controller step allocates nothing, with either tuner running (the
-//! cost tuner's once-per-period model minimisation included).
+//! cost tuner's once-per-period model minimisation included), and neither does taking the
+//! controller's snapshot, which the servo board does every tick.
 
 use afs_shared::sim::{Lockstep, SimConfig};
 use afs_shared::tuner::{CostTunerParams, ThesisTunerParams, TunerConfig};
@@ -52,6 +53,7 @@ fn allocations_during_steps(tuner: TunerConfig) -> usize {
     // 1.5 s: 15 dither periods, so the cost tuner's per-period update runs several times.
     for _ in 0..15_000 {
         sim.step();
+        std::hint::black_box(sim.servo().state());
     }
     ALLOCATIONS.with(Cell::get) - before
 }
