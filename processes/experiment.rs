@@ -2,6 +2,7 @@
 //! returns its JSON report.
 
 use crate::plot;
+use afs_shared::error::ExperimentError;
 use afs_shared::experiments::{self, Options, Outcome};
 use afs_shared::sim::SimConfig;
 use anyhow::{Context, Result, bail};
@@ -64,9 +65,9 @@ pub fn run(name: &str, opts: &Options, out_dir: &Path) -> Result<(Value, bool)> 
 }
 
 fn pack<S: Serialize>(
-    r: Result<Outcome<S>, String>,
+    r: Result<Outcome<S>, ExperimentError>,
 ) -> Result<(Value, experiments::Figure, bool, f64)> {
-    let o = r.map_err(anyhow::Error::msg)?;
+    let o = r?;
     let passed = o.passed();
     let v = serde_json::to_value(&o).context("serialising the report")?;
     Ok((v, o.figure, passed, o.simulated_s))

@@ -18,6 +18,7 @@ use afs_shared::msg::{
     WrenchSample, fixed_str,
 };
 use afs_shared::scenario::{self, Agreement, Scenario, ScenarioReport};
+use afs_shared::servo::ServoMode;
 use afs_shared::sim::SimConfig;
 use anyhow::{Context, Result, bail};
 use iceoryx2::port::update_connections::UpdateConnections;
@@ -1529,7 +1530,7 @@ fn supervise(
         while let Ok(Some(s)) = ports.servo.receive() {
             let v = *s.payload();
             servo_view = ServoView {
-                mode: msg::servo_mode_from_code(v.mode),
+                mode: ServoMode::try_from(v.mode).ok(),
                 started: v.estimations_started,
             };
             if let Some(r) = recorder.as_mut() {

@@ -12,6 +12,7 @@
 //! the elbow motor's stator), m2' the mass of link 2 and tip, and β = l1 × (first moment of
 //! link 2 and tip about joint 2).
 
+use crate::error::ConfigError;
 use crate::math::Vec2;
 use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
@@ -164,14 +165,14 @@ impl Arm {
     }
 
     /// Checks the parameters.
-    pub fn validate(params: &ArmParams) -> Result<(), String> {
+    pub fn validate(params: &ArmParams) -> Result<(), ConfigError> {
         let vals = [
             ("link1_length_m", params.link1_length_m),
             ("link2_length_m", params.link2_length_m),
         ];
         for (n, v) in vals {
             if !(v.is_finite() && v > 0.0) {
-                return Err(format!("arm.{n} = {v} must be > 0"));
+                return Err(ConfigError::setting(format!("arm.{n}"), v, "must be > 0"));
             }
         }
         let nonneg = [
@@ -196,12 +197,19 @@ impl Arm {
         ];
         for (n, v) in nonneg {
             if !(v.is_finite() && v >= 0.0) {
-                return Err(format!("arm.{n} = {v} must be a non-negative number"));
+                return Err(ConfigError::setting(
+                    format!("arm.{n}"),
+                    v,
+                    "must be a non-negative number",
+                ));
             }
         }
         let arm = Arm::new(*params);
         if arm.i2 <= 0.0 || arm.i1 <= 0.0 {
-            return Err("arm inertias must be positive: give the links mass or inertia".into());
+            return Err(ConfigError::rule(
+                "arm inertias",
+                "must be positive: give the links mass or inertia",
+            ));
         }
         Ok(())
     }

@@ -7,6 +7,7 @@
 //! tool A·sin α along the normal, which must stay below the preload's penetration
 //! `F_preload / k_e` (thesis §6.2.1).
 
+use crate::error::ConfigError;
 use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::{Deserialize, Serialize};
@@ -74,34 +75,38 @@ impl DitherParams {
     }
 
     /// Checks the settings.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ConfigError> {
         if !(self.frequency_hz.is_finite() && self.frequency_hz > 0.0) {
-            return Err(format!(
-                "dither.frequency_hz = {} must be > 0",
-                self.frequency_hz
+            return Err(ConfigError::setting(
+                "dither.frequency_hz",
+                self.frequency_hz,
+                "must be > 0",
             ));
         }
         if !(self.max_amplitude_m.is_finite() && self.max_amplitude_m >= 0.0) {
-            return Err(format!(
-                "dither.max_amplitude_m = {} must be ≥ 0",
-                self.max_amplitude_m
+            return Err(ConfigError::setting(
+                "dither.max_amplitude_m",
+                self.max_amplitude_m,
+                "must be ≥ 0",
             ));
         }
         if !(self.tangent_uncertainty_deg.is_finite()
             && (0.0..90.0).contains(&self.tangent_uncertainty_deg))
         {
-            return Err(format!(
-                "dither.tangent_uncertainty_deg = {} must lie in [0, 90)",
-                self.tangent_uncertainty_deg
+            return Err(ConfigError::setting(
+                "dither.tangent_uncertainty_deg",
+                self.tangent_uncertainty_deg,
+                "must lie in [0, 90)",
             ));
         }
         if !(self.contact_margin.is_finite()
             && self.contact_margin > 0.0
             && self.contact_margin <= 1.0)
         {
-            return Err(format!(
-                "dither.contact_margin = {} must lie in (0, 1]",
-                self.contact_margin
+            return Err(ConfigError::setting(
+                "dither.contact_margin",
+                self.contact_margin,
+                "must lie in (0, 1]",
             ));
         }
         Ok(())

@@ -2,6 +2,7 @@
 //! that say whether the stack stayed safe through them (from the world and servo samples of
 //! each tick, as the supervisor receives them).
 
+use crate::error::UnknownName;
 use crate::msg::{PlantSample, SERVO_FORCE_VALID, SERVO_SAFE, ServoSample};
 use rand_chacha::ChaCha8Rng;
 use rand_chacha::rand_core::{Rng, SeedableRng};
@@ -74,14 +75,15 @@ impl FaultKind {
     ];
 
     /// The kind named `name` (one of [`FaultKind::ALL`]).
-    pub fn from_name(name: &str) -> Result<Self, String> {
+    pub fn from_name(name: &str) -> Result<Self, UnknownName> {
         Self::ALL
             .iter()
             .find(|(n, _)| *n == name)
             .map(|(_, k)| *k)
-            .ok_or_else(|| {
-                let names: Vec<&str> = Self::ALL.iter().map(|(n, _)| *n).collect();
-                format!("unknown fault '{name}' (one of: {})", names.join(", "))
+            .ok_or_else(|| UnknownName {
+                what: "fault",
+                name: name.into(),
+                known: Self::ALL.iter().map(|(n, _)| *n).collect(),
             })
     }
 

@@ -17,6 +17,7 @@
 //!
 //! A new tangent estimate is fed forward by re-basing the frame at the current set-point.
 
+use crate::error::ConfigError;
 use crate::math::{Vec2, perp, unit};
 use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
@@ -52,7 +53,7 @@ impl Default for HybridParams {
 
 impl HybridParams {
     /// Checks the settings.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ConfigError> {
         let pos = [
             ("preload_n", self.preload_n),
             (
@@ -68,13 +69,18 @@ impl HybridParams {
         ];
         for (n, v) in pos {
             if !(v.is_finite() && v > 0.0) {
-                return Err(format!("hybrid.{n} = {v} must be > 0"));
+                return Err(ConfigError::setting(
+                    format!("hybrid.{n}"),
+                    v,
+                    "must be > 0",
+                ));
             }
         }
         if self.preload_n > 100.0 {
-            return Err(format!(
-                "hybrid.preload_n = {} exceeds 100 N; the sensor is rated 130 N",
-                self.preload_n
+            return Err(ConfigError::setting(
+                "hybrid.preload_n",
+                self.preload_n,
+                "exceeds 100 N; the sensor is rated 130 N",
             ));
         }
         Ok(())

@@ -4,6 +4,7 @@
 pub mod arm;
 pub mod correlation;
 pub mod dither;
+pub mod error;
 pub mod experiments;
 pub mod faults;
 pub mod friction;

@@ -13,6 +13,7 @@
 
 use crate::arm::JointServoState;
 use crate::dither::DitherState;
+use crate::error::ConfigError;
 use crate::hybrid::HybridState;
 use crate::sensor::Wrench;
 use crate::servo::{EstimationCounters, ServoDiag, ServoMode, ServoState};
@@ -188,7 +189,7 @@ pub const SERVO_AWAITING_ESTIMATE: u32 = 8;
 pub struct ServoSample {
     /// [`VERSION`].
     pub version: u32,
-    /// [`servo_mode_code`].
+    /// [`ServoMode`] as its wire code (`u32::from`, `ServoMode::try_from`).
     pub mode: u32,
     /// `SERVO_*` flags.
     pub flags: u32,
@@ -250,16 +251,6 @@ pub struct ServoSample {
     pub reserved: u32,
 }
 
-/// [`ServoMode`] as a number: 0 track, 1 stopping, 2 probing, 3 awaiting estimate, 4 resuming.
-pub fn servo_mode_code(m: ServoMode) -> u32 {
-    m.code()
-}
-
-/// The inverse of [`servo_mode_code`].
-pub fn servo_mode_from_code(c: u32) -> Option<ServoMode> {
-    ServoMode::from_code(c)
-}
-
 impl ServoSample {
     /// Fills the controller fields from the core's diagnostics and counters.
     pub fn set_diag(&mut self, d: &ServoDiag, c: &EstimationCounters) {
@@ -279,7 +270,7 @@ impl ServoSample {
         } else {
             self.flags &= !SERVO_AWAITING_ESTIMATE;
         }
-        self.mode = servo_mode_code(d.mode);
+        self.mode = d.mode.into();
         self.normal_force_n = d.normal_force_n;
         self.tangential_force_n = d.tangential_force_n;
         self.friction_normalized_n = d.friction_normalized_n;
@@ -465,7 +456,7 @@ impl From<&TangentParams> for TangentParamsMsg {
 
 impl TangentParamsMsg {
     /// Back to the core's settings, checked.
-    pub fn to_params(&self) -> Result<TangentParams, String> {
+    pub fn to_params(&self) -> Result<TangentParams, ConfigError> {
         let p = TangentParams {
             probe_angles_deg: self.probe_angles_deg,
             reprobe_angles_deg: self.reprobe_angles_deg,

@@ -9,6 +9,7 @@
 //! Allocation-free.
 
 use crate::arm::{Arm, ArmParams, Elbow};
+use crate::error::ConfigError;
 use crate::friction::{FrictionLaw, Presliding, PreslidingParams, RoughnessMap};
 use crate::math::{Vec2, cross};
 use crate::sensor::Wrench;
@@ -58,36 +59,49 @@ impl Default for PlantParams {
 
 impl PlantParams {
     /// Checks every parameter; the message names the field.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ConfigError> {
         Arm::validate(&self.arm)?;
         self.contact.validate()?;
-        self.friction.validate().map_err(|e| e.to_string())?;
-        self.presliding.validate().map_err(|e| e.to_string())?;
+        self.friction.validate()?;
+        self.presliding.validate()?;
         let r = self.reference_normal_force_n;
         if !(r.is_finite() && r > 0.0) {
-            return Err(format!("plant.reference_normal_force_n = {r} must be > 0"));
+            return Err(ConfigError::setting(
+                "plant.reference_normal_force_n",
+                r,
+                "must be > 0",
+            ));
         }
         if !(self.tool_mass_kg.is_finite() && self.tool_mass_kg >= 0.0) {
-            return Err(format!(
-                "plant.tool_mass_kg = {} must be ≥ 0",
-                self.tool_mass_kg
+            return Err(ConfigError::setting(
+                "plant.tool_mass_kg",
+                self.tool_mass_kg,
+                "must be ≥ 0",
             ));
         }
         if self.tool_mass_kg > self.arm.tip_mass_kg {
-            return Err(format!(
-                "plant.tool_mass_kg = {} exceeds arm.tip_mass_kg = {} (the tip mass includes the tool)",
-                self.tool_mass_kg, self.arm.tip_mass_kg
+            return Err(ConfigError::setting(
+                "plant.tool_mass_kg",
+                self.tool_mass_kg,
+                format!(
+                    "exceeds arm.tip_mass_kg = {} (the tip mass includes the tool)",
+                    self.arm.tip_mass_kg
+                ),
             ));
         }
         if !(self.tool_length_m.is_finite() && self.tool_length_m >= 0.0) {
-            return Err(format!(
-                "plant.tool_length_m = {} must be ≥ 0",
-                self.tool_length_m
+            return Err(ConfigError::setting(
+                "plant.tool_length_m",
+                self.tool_length_m,
+                "must be ≥ 0",
             ));
         }
         for p in &self.roughness.patches {
             if !(p.centre_m.is_finite() && p.half_width_m.is_finite() && p.gain.is_finite()) {
-                return Err("plant.roughness has a non-finite patch".into());
+                return Err(ConfigError::rule(
+                    "plant.roughness",
+                    "has a non-finite patch",
+                ));
             }
         }
         Ok(())

@@ -9,6 +9,7 @@
 //! [`ScenarioReport`], so the real-time stack and its lockstep reference are measured by one
 //! piece of code and [`Agreement`] can compare them.
 
+use crate::error::{ScenarioError, UnknownName};
 use crate::experiments::{Tick, WindowSummary, on_corner_profile, sliding_periods, window};
 use crate::msg::{self, PlantSample, SERVO_SAFE, ServoSample};
 use crate::plant::PlantTruth;
@@ -44,17 +45,18 @@ pub enum ScenarioKind {
 
 impl ScenarioKind {
     /// By name.
-    pub fn from_name(name: &str) -> Result<Self, String> {
+    pub fn from_name(name: &str) -> Result<Self, UnknownName> {
         Ok(match name {
             "surface-tracking" => Self::SurfaceTracking,
             "corner" => Self::Corner,
             "friction-suppression" => Self::FrictionSuppression,
             "friction-id" => Self::FrictionId,
             other => {
-                return Err(format!(
-                    "unknown scenario '{other}'; choose one of: {}",
-                    NAMES.join(", ")
-                ));
+                return Err(UnknownName {
+                    what: "scenario",
+                    name: other.into(),
+                    known: NAMES.to_vec(),
+                });
             }
         })
     }
@@ -107,7 +109,7 @@ pub struct Scenario {
 impl Scenario {
     /// Builds `name` over the base configuration (surface, start, tuner and tracking switches
     /// are the scenario's; everything else comes from `base`).
-    pub fn new(name: &str, base: &SimConfig) -> Result<Self, String> {
+    pub fn new(name: &str, base: &SimConfig) -> Result<Self, ScenarioError> {
         let kind = ScenarioKind::from_name(name)?;
         let mut cfg = base.clone();
         let origin = cfg.surface.frame.origin_m;
@@ -313,7 +315,7 @@ pub fn ident_tick(s: &ServoSample) -> crate::ident::IdentTick {
         friction_normalized: s.friction_normalized_n,
         normal_force: s.normal_force_n,
         tangent_velocity: s.tangent_velocity_m_per_s,
-        tracking: msg::servo_mode_from_code(s.mode) == Some(ServoMode::Track)
+        tracking: ServoMode::try_from(s.mode) == Ok(ServoMode::Track)
             && s.flags & SERVO_SAFE == 0
             && s.flags & msg::SERVO_FORCE_VALID != 0,
     }
@@ -402,7 +404,7 @@ impl MonitorTick {
             contact: p.contact_count > 0 && p.normal_force_n > 0.0,
             tangent_true: p.tangent_angle_rad,
             u: p.surface_u_m,
-            moving: msg::servo_mode_from_code(s.mode) == Some(ServoMode::Track)
+            moving: ServoMode::try_from(s.mode) == Ok(ServoMode::Track)
                 && s.flags & SERVO_SAFE == 0,
             tangent_estimated: s.tangent_angle_rad,
             friction: -s.tangential_force_n * dir,
@@ -798,7 +800,7 @@ pub struct ScenarioReport {
 /// Runs `scenario` for `duration_s` (or to its end) in the lockstep simulation: the reference
 /// the real-time stack is compared with. Tick `seq` (from 1, as the servo numbers them) steps
 /// the world from simulated time (seq − 1)·dt.
-pub fn run_lockstep(scenario: &Scenario, duration_s: f64) -> Result<ScenarioReport, String> {
+pub fn run_lockstep(scenario: &Scenario, duration_s: f64) -> Result<ScenarioReport, ScenarioError> {
     run_lockstep_replay(scenario, duration_s, &Replay::default())
 }
 
@@ -825,7 +827,7 @@ pub fn run_lockstep_replay(
     scenario: &Scenario,
     duration_s: f64,
     replay: &Replay<'_>,
-) -> Result<ScenarioReport, String> {
+) -> Result<ScenarioReport, ScenarioError> {
     let invalid = replay.force_invalid;
     let mut sim = Lockstep::new(&scenario.cfg)?;
     let mut driver = scenario.driver();
@@ -837,7 +839,8 @@ pub fn run_lockstep_replay(
         let t = (seq - 1) as f64 * dt;
         let u = sim.truth().surface_u_m;
         if replay.servo_restarts.binary_search(&seq).is_ok() {
-            sim.restart_servo()?;
+            sim.restart_servo()
+                .map_err(|reason| ScenarioError::Restart { tick: seq, reason })?;
         }
         if driver.step(t, u, sim.servo_mut()) == DriverState::Done {
             break;
@@ -964,7 +967,8 @@ mod tests {
             assert_eq!(s.kind.name(), n);
         }
         let e = Scenario::new("nope", &base).unwrap_err();
-        assert!(e.contains("surface-tracking"), "{e}");
+        assert!(matches!(e, ScenarioError::Unknown(_)), "{e:?}");
+        assert!(e.to_string().contains("surface-tracking"), "{e}");
     }
 
     /// The surface-tracking scenario run through the lockstep gives the same figures, bit for

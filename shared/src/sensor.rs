@@ -15,6 +15,7 @@
 //!
 //! Pure and deterministic: the noise comes from a seeded ChaCha8 generator.
 
+use crate::error::ConfigError;
 use crate::math::Vec2;
 use rand_chacha::ChaCha8Rng;
 use rand_chacha::rand_core::SeedableRng;
@@ -97,11 +98,12 @@ impl SensorParams {
     }
 
     /// Checks the parameters; the message names the field and what to do.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ConfigError> {
         if !(self.rate_hz.is_finite() && self.rate_hz >= 10.0 && self.rate_hz <= 100_000.0) {
-            return Err(format!(
-                "sensor.rate_hz = {} must lie in [10, 100000]",
-                self.rate_hz
+            return Err(ConfigError::setting(
+                "sensor.rate_hz",
+                self.rate_hz,
+                "must lie in [10, 100000]",
             ));
         }
         let nonneg = [
@@ -116,14 +118,21 @@ impl SensorParams {
         ];
         for (n, v) in nonneg {
             if !(v.is_finite() && v >= 0.0) {
-                return Err(format!("sensor.{n} = {v} must be a non-negative number"));
+                return Err(ConfigError::setting(
+                    format!("sensor.{n}"),
+                    v,
+                    "must be a non-negative number",
+                ));
             }
         }
         if self.cutoff_hz > 0.0 && self.cutoff_hz >= 0.5 * self.rate_hz {
-            return Err(format!(
-                "sensor.cutoff_hz = {} must be below half the sample rate ({} Hz), or 0 for no filter",
+            return Err(ConfigError::setting(
+                "sensor.cutoff_hz",
                 self.cutoff_hz,
-                0.5 * self.rate_hz
+                format!(
+                    "must be below half the sample rate ({} Hz), or 0 for no filter",
+                    0.5 * self.rate_hz
+                ),
             ));
         }
         for (n, v) in [
@@ -132,7 +141,11 @@ impl SensorParams {
             ("drift_correlation_s", self.drift_correlation_s),
         ] {
             if !(v.is_finite() && v > 0.0) {
-                return Err(format!("sensor.{n} = {v} must be > 0"));
+                return Err(ConfigError::setting(
+                    format!("sensor.{n}"),
+                    v,
+                    "must be > 0",
+                ));
             }
         }
         Ok(())
@@ -378,7 +391,12 @@ mod tests {
             cutoff_hz: 4000.0,
             ..SensorParams::default()
         };
-        assert!(p.validate().unwrap_err().contains("cutoff_hz"));
+        let e = p.validate().unwrap_err();
+        assert!(
+            matches!(&e, ConfigError::Setting { setting, value, .. }
+                if setting == "sensor.cutoff_hz" && *value == 4000.0),
+            "{e:?}"
+        );
         let p = SensorParams {
             noise_force_n: -1.0,
             ..SensorParams::default()

@@ -10,6 +10,7 @@ use crate::arm::{
     Arm, ArmParams, Elbow, JointServo, JointServoState, PidGains, tune_pid_for_bandwidth,
 };
 use crate::dither::{Dither, DitherParams, DitherState};
+use crate::error::{ConfigError, SnapshotError};
 use crate::friction::FrictionLaw;
 use crate::hybrid::{
     HybridCommand, HybridController, HybridParams, HybridState, SetpointOffset, TaskFrame,
@@ -98,11 +99,12 @@ impl Default for SafeParams {
 
 impl SafeParams {
     /// Checks the settings.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ConfigError> {
         if !(self.backoff_fraction.is_finite() && (0.0..=1.0).contains(&self.backoff_fraction)) {
-            return Err(format!(
-                "servo.safe.backoff_fraction = {} must lie in [0, 1]",
-                self.backoff_fraction
+            return Err(ConfigError::setting(
+                "servo.safe.backoff_fraction",
+                self.backoff_fraction,
+                "must lie in [0, 1]",
             ));
         }
         for (n, v) in [
@@ -111,7 +113,11 @@ impl SafeParams {
             ("recovery_s", self.recovery_s),
         ] {
             if !(v.is_finite() && v > 0.0 && v <= 10.0) {
-                return Err(format!("servo.safe.{n} = {v} must lie in (0, 10] s"));
+                return Err(ConfigError::setting(
+                    format!("servo.safe.{n}"),
+                    v,
+                    "must lie in (0, 10] s",
+                ));
             }
         }
         Ok(())
@@ -198,10 +204,10 @@ pub enum ServoMode {
     Resuming,
 }
 
-impl ServoMode {
-    /// Its wire code: 0 track, 1 stopping, 2 probing, 3 awaiting estimate, 4 resuming.
-    pub fn code(self) -> u32 {
-        match self {
+/// The wire code of a mode: 0 track, 1 stopping, 2 probing, 3 awaiting estimate, 4 resuming.
+impl From<ServoMode> for u32 {
+    fn from(m: ServoMode) -> u32 {
+        match m {
             ServoMode::Track => 0,
             ServoMode::Stopping => 1,
             ServoMode::Probing => 2,
@@ -209,16 +215,19 @@ impl ServoMode {
             ServoMode::Resuming => 4,
         }
     }
+}
 
-    /// The mode of a wire code (None: unknown).
-    pub fn from_code(c: u32) -> Option<Self> {
-        Some(match c {
+/// The mode of a wire code; an unknown code is refused (and given back).
+impl TryFrom<u32> for ServoMode {
+    type Error = u32;
+    fn try_from(c: u32) -> Result<Self, u32> {
+        Ok(match c {
             0 => ServoMode::Track,
             1 => ServoMode::Stopping,
             2 => ServoMode::Probing,
             3 => ServoMode::AwaitingEstimate,
             4 => ServoMode::Resuming,
-            _ => return None,
+            _ => return Err(c),
         })
     }
 }
@@ -319,53 +328,57 @@ impl Default for ServoParams {
 
 impl ServoParams {
     /// Checks every setting; the message names the field.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ConfigError> {
         if !(self.rate_hz.is_finite() && (100.0..=100_000.0).contains(&self.rate_hz)) {
-            return Err(format!(
-                "servo.rate_hz = {} must lie in [100, 100000]",
-                self.rate_hz
+            return Err(ConfigError::setting(
+                "servo.rate_hz",
+                self.rate_hz,
+                "must lie in [100, 100000]",
             ));
         }
         for (j, b) in self.joint_bandwidth_hz.iter().enumerate() {
             if !(b.is_finite() && *b > 0.0 && *b < self.rate_hz / 20.0) {
-                return Err(format!(
-                    "servo.joint_bandwidth_hz[{j}] = {b} must be > 0 and below rate_hz/20 = {}",
-                    self.rate_hz / 20.0
+                return Err(ConfigError::setting(
+                    format!("servo.joint_bandwidth_hz[{j}]"),
+                    *b,
+                    format!("must be > 0 and below rate_hz/20 = {}", self.rate_hz / 20.0),
                 ));
             }
         }
         if !(self.joint_damping_ratio.is_finite() && self.joint_damping_ratio > 0.0) {
-            return Err(format!(
-                "servo.joint_damping_ratio = {} must be > 0",
-                self.joint_damping_ratio
+            return Err(ConfigError::setting(
+                "servo.joint_damping_ratio",
+                self.joint_damping_ratio,
+                "must be > 0",
             ));
         }
         if !(self.joint_integral_ratio.is_finite()
             && self.joint_integral_ratio >= 0.0
             && self.joint_integral_ratio < 1.0)
         {
-            return Err(format!(
-                "servo.joint_integral_ratio = {} must lie in [0, 1)",
-                self.joint_integral_ratio
+            return Err(ConfigError::setting(
+                "servo.joint_integral_ratio",
+                self.joint_integral_ratio,
+                "must lie in [0, 1)",
             ));
         }
         self.hybrid.validate()?;
         self.dither.validate()?;
         self.safe.validate()?;
         self.tuner.validate()?;
-        self.friction_model
-            .validate()
-            .map_err(|e| format!("servo.friction_model: {e}"))?;
+        self.friction_model.validate()?;
         if !(self.friction_model_reference_n.is_finite() && self.friction_model_reference_n > 0.0) {
-            return Err(format!(
-                "servo.friction_model_reference_n = {} must be > 0",
-                self.friction_model_reference_n
+            return Err(ConfigError::setting(
+                "servo.friction_model_reference_n",
+                self.friction_model_reference_n,
+                "must be > 0",
             ));
         }
         if !(self.tool_mass_kg.is_finite() && self.tool_mass_kg >= 0.0) {
-            return Err(format!(
-                "servo.tool_mass_kg = {} must be ≥ 0",
-                self.tool_mass_kg
+            return Err(ConfigError::setting(
+                "servo.tool_mass_kg",
+                self.tool_mass_kg,
+                "must be ≥ 0",
             ));
         }
         Ok(())
@@ -500,7 +513,7 @@ pub const STATE_LAST_ESTIMATE: u32 = 32;
 #[type_name("afs::ServoState")]
 #[repr(C)]
 pub struct ServoState {
-    /// [`ServoMode`] code (as `msg::servo_mode_code`).
+    /// [`ServoMode`] as its wire code.
     pub mode: u32,
     /// `STATE_*` flags.
     pub flags: u32,
@@ -551,9 +564,9 @@ pub struct ServoState {
 }
 
 impl ServoState {
-    /// True when every number is finite and the codes are known (a snapshot that is not must
+    /// Checks that every number is finite and the codes are known (a snapshot that is not must
     /// not be restored).
-    pub fn is_sane(&self) -> bool {
+    pub fn check(&self) -> Result<(), SnapshotError> {
         let mut finite = true;
         let mut all = |v: &[f64]| finite &= v.iter().all(|x| x.is_finite());
         let (j, h, d, t) = (&self.joints, &self.hybrid, &self.dither, &self.tuner);
@@ -599,7 +612,13 @@ impl ServoState {
         all(&self.stopped_settled_s);
         all(&self.safe);
         all(&self.last_stroke_m);
-        finite && self.mode <= 4 && self.last_trigger <= 4
+        if !finite {
+            Err(SnapshotError::NotFinite)
+        } else if ServoMode::try_from(self.mode).is_err() || self.last_trigger > 4 {
+            Err(SnapshotError::UnknownCode)
+        } else {
+            Ok(())
+        }
     }
 }
 
@@ -625,7 +644,7 @@ impl ServoCore {
         q0: Vector2<f64>,
         wrench0: Wrench,
         tangent_angle: f64,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, ConfigError> {
         params.validate()?;
         Arm::validate(&arm_params)?;
         let arm = Arm::new(arm_params);
@@ -833,7 +852,7 @@ impl ServoCore {
         });
         let (angle, at) = self.last_estimate.unwrap_or((0.0, 0.0));
         ServoState {
-            mode: self.mode.code(),
+            mode: self.mode.into(),
             flags: flag(self.tuning, STATE_TUNING)
                 | flag(self.force_control, STATE_FORCE_CONTROL)
                 | flag(self.force_armed, STATE_FORCE_ARMED)
@@ -883,13 +902,9 @@ impl ServoCore {
     /// its beginning: its record is not in the state, and an answer to it would go to the
     /// process that asked. Refuses (and changes nothing) a state with a non-finite number or an
     /// unknown code.
-    pub fn restore(&mut self, st: &ServoState) -> Result<(), String> {
-        if !st.is_sane() {
-            return Err(
-                "the controller snapshot holds a non-finite value or an unknown code".into(),
-            );
-        }
-        let mode = ServoMode::from_code(st.mode).unwrap_or_default();
+    pub fn restore(&mut self, st: &ServoState) -> Result<(), SnapshotError> {
+        st.check()?;
+        let mode = ServoMode::try_from(st.mode).unwrap_or_default();
         let has = |f: u32| st.flags & f != 0;
         let c = st.counters.map(|v| v as usize);
         self.counters = EstimationCounters {

@@ -4,6 +4,7 @@
 //! real time; the same [`Plant`], [`SensorModel`] and [`ServoCore`] code runs in both.
 
 use crate::arm::{Arm, Elbow};
+use crate::error::{ConfigError, SnapshotError};
 use crate::math::Vec2;
 use crate::plant::{Plant, PlantParams, PlantTruth};
 use crate::sensor::{Reading, SensorModel, SensorParams, Wrench};
@@ -56,33 +57,36 @@ impl Default for SimConfig {
 
 impl SimConfig {
     /// Checks the whole set-up.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ConfigError> {
         self.plant.validate()?;
-        self.surface.validate().map_err(|e| e.to_string())?;
+        self.surface.validate()?;
         self.sensor.validate()?;
         self.servo.validate()?;
         if !self.start_u_m.is_finite() || !self.tangent_error_rad.is_finite() {
-            return Err("start_u_m and tangent_error_rad must be finite".into());
+            return Err(ConfigError::rule(
+                "start_u_m and tangent_error_rad",
+                "must be finite",
+            ));
         }
         if self.tangent_error_rad.abs() > 0.5 {
-            return Err(format!(
-                "tangent_error_rad = {} is beyond ±0.5 rad; the hybrid controller needs a rough estimate",
-                self.tangent_error_rad
+            return Err(ConfigError::setting(
+                "tangent_error_rad",
+                self.tangent_error_rad,
+                "is beyond ±0.5 rad; the hybrid controller needs a rough estimate",
             ));
         }
         Ok(())
     }
 
     /// The joint angles that put the tool at the start point pressed in to the preload.
-    pub fn start_configuration(&self) -> Result<nalgebra::Vector2<f64>, String> {
+    pub fn start_configuration(&self) -> Result<nalgebra::Vector2<f64>, ConfigError> {
         let arm = Arm::new(self.plant.arm);
         let on_surface = self.surface.point_at(self.start_u_m);
         let angle = self.surface.tangent_angle_at(self.start_u_m);
         let normal = crate::math::perp(crate::math::unit(angle));
         let depth = self.servo.hybrid.preload_n / self.plant.contact.stiffness();
         let tip: Vec2 = on_surface - normal * depth;
-        arm.inverse(tip, self.plant.elbow)
-            .map_err(|e| format!("start point: {e}"))
+        Ok(arm.inverse(tip, self.plant.elbow)?)
     }
 }
 
@@ -135,7 +139,7 @@ pub struct Lockstep {
 
 impl Lockstep {
     /// Builds the set-up at rest in contact at the preload.
-    pub fn new(cfg: &SimConfig) -> Result<Self, String> {
+    pub fn new(cfg: &SimConfig) -> Result<Self, ConfigError> {
         cfg.validate()?;
         let q = cfg.start_configuration()?;
         let plant = Plant::new(cfg.plant.clone(), cfg.surface.clone(), q);
@@ -223,7 +227,7 @@ impl Lockstep {
     /// Replaces the servo by one built as the first was and given the old one's state
     /// ([`ServoCore::state`], [`ServoCore::restore`]), as the stack's servo board does when
     /// the supervisor restarts it: the lockstep goes through the same restart.
-    pub fn restart_servo(&mut self) -> Result<(), String> {
+    pub fn restart_servo(&mut self) -> Result<(), SnapshotError> {
         let state = self.servo.state();
         let tare = self.servo.tare();
         let mut servo = self.fresh.clone();

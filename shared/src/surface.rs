@@ -13,6 +13,7 @@
 //! [`ContactLaw`] turns penetration into force: the interaction stiffness k_e in series with the
 //! sensor's stiffness (thesis §4.5.1), plus a small normal damping; the force never pulls.
 
+use crate::error::ConfigError;
 use crate::math::{Vec2, perp, series_stiffness, unit};
 use serde::{Deserialize, Serialize};
 
@@ -407,7 +408,7 @@ impl ContactLaw {
     }
 
     /// Checks the parameters.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ConfigError> {
         for (name, v) in [
             (
                 "interaction_stiffness_n_per_m",
@@ -416,13 +417,18 @@ impl ContactLaw {
             ("sensor_stiffness_n_per_m", self.sensor_stiffness_n_per_m),
         ] {
             if !(v.is_finite() && v > 0.0) {
-                return Err(format!("contact.{name} = {v} must be a positive number"));
+                return Err(ConfigError::setting(
+                    format!("contact.{name}"),
+                    v,
+                    "must be a positive number",
+                ));
             }
         }
         if !(self.damping_n_s_per_m.is_finite() && self.damping_n_s_per_m >= 0.0) {
-            return Err(format!(
-                "contact.damping_n_s_per_m = {} must be ≥ 0",
-                self.damping_n_s_per_m
+            return Err(ConfigError::setting(
+                "contact.damping_n_s_per_m",
+                self.damping_n_s_per_m,
+                "must be ≥ 0",
             ));
         }
         Ok(())

@@ -26,6 +26,7 @@
 //!
 //! Derivations in `docs/surface-tracking.md`.
 
+use crate::error::ConfigError;
 use crate::math::{Vec2, perp, unit};
 use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
@@ -85,7 +86,7 @@ impl Default for TangentParams {
 
 impl TangentParams {
     /// Checks the settings.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ConfigError> {
         for (n, v) in [
             ("probe_angles_deg[0]", self.probe_angles_deg[0]),
             ("probe_angles_deg[1]", self.probe_angles_deg[1]),
@@ -93,28 +94,38 @@ impl TangentParams {
             ("reprobe_angles_deg[1]", self.reprobe_angles_deg[1]),
         ] {
             if !(v.is_finite() && v.abs() < 60.0) {
-                return Err(format!("tangent.{n} = {v} must lie in (−60, 60) degrees"));
+                return Err(ConfigError::setting(
+                    format!("tangent.{n}"),
+                    v,
+                    "must lie in (−60, 60) degrees",
+                ));
             }
         }
         if self.probe_angles_deg[0] == self.probe_angles_deg[1] {
-            return Err("tangent.probe_angles_deg must be two different angles".into());
+            return Err(ConfigError::rule(
+                "tangent.probe_angles_deg",
+                "must be two different angles",
+            ));
         }
         if !(self.amplitude_m.is_finite() && self.amplitude_m > 0.0 && self.amplitude_m < 0.02) {
-            return Err(format!(
-                "tangent.amplitude_m = {} must lie in (0, 0.02)",
-                self.amplitude_m
+            return Err(ConfigError::setting(
+                "tangent.amplitude_m",
+                self.amplitude_m,
+                "must lie in (0, 0.02)",
             ));
         }
         if !(self.frequency_hz.is_finite() && self.frequency_hz > 0.0 && self.frequency_hz <= 5.0) {
-            return Err(format!(
-                "tangent.frequency_hz = {} must lie in (0, 5]",
-                self.frequency_hz
+            return Err(ConfigError::setting(
+                "tangent.frequency_hz",
+                self.frequency_hz,
+                "must lie in (0, 5]",
             ));
         }
         if self.periods == 0 || self.periods > 20 {
-            return Err(format!(
-                "tangent.periods = {} must lie in 1..=20",
-                self.periods
+            return Err(ConfigError::setting(
+                "tangent.periods",
+                self.periods as f64,
+                "must lie in 1..=20",
             ));
         }
         for (n, v) in [
@@ -126,13 +137,18 @@ impl TangentParams {
             ("noise_std_n", self.noise_std_n),
         ] {
             if !(v.is_finite() && v >= 0.0) {
-                return Err(format!("tangent.{n} = {v} must be ≥ 0"));
+                return Err(ConfigError::setting(
+                    format!("tangent.{n}"),
+                    v,
+                    "must be ≥ 0",
+                ));
             }
         }
         if !(0.0..1.0).contains(&self.contact_loss_fraction) {
-            return Err(format!(
-                "tangent.contact_loss_fraction = {} must lie in [0, 1)",
-                self.contact_loss_fraction
+            return Err(ConfigError::setting(
+                "tangent.contact_loss_fraction",
+                self.contact_loss_fraction,
+                "must lie in [0, 1)",
             ));
         }
         Ok(())

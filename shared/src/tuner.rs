@@ -22,6 +22,7 @@
 //!
 //! Derivations in `docs/friction-suppression.md`.
 
+use crate::error::ConfigError;
 use crate::friction::FrictionLaw;
 use crate::math::grid_then_golden;
 use crate::window::{PeriodStats, PeriodWindow, PeriodWindowState, SlidingSummary, SlidingWindow};
@@ -112,20 +113,22 @@ impl Default for TunerConfig {
 
 impl TunerConfig {
     /// Checks the settings.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ConfigError> {
         match self {
             TunerConfig::Fixed => Ok(()),
             TunerConfig::Thesis(p) => {
                 if !(p.learning_rate.is_finite() && p.learning_rate >= 0.0) {
-                    return Err(format!(
-                        "tuner.learning_rate = {} must be ≥ 0",
-                        p.learning_rate
+                    return Err(ConfigError::setting(
+                        "tuner.learning_rate",
+                        p.learning_rate,
+                        "must be ≥ 0",
                     ));
                 }
                 if !(p.window_s.is_finite() && p.window_s > 0.0 && p.window_s <= 10.0) {
-                    return Err(format!(
-                        "tuner.window_s = {} must lie in (0, 10]",
-                        p.window_s
+                    return Err(ConfigError::setting(
+                        "tuner.window_s",
+                        p.window_s,
+                        "must lie in (0, 10]",
                     ));
                 }
                 Ok(())
@@ -135,28 +138,31 @@ impl TunerConfig {
                     && p.oscillation_weight > 0.0
                     && p.oscillation_weight <= 1.0)
                 {
-                    return Err(format!(
-                        "tuner.oscillation_weight = {} must lie in (0, 1]",
-                        p.oscillation_weight
+                    return Err(ConfigError::setting(
+                        "tuner.oscillation_weight",
+                        p.oscillation_weight,
+                        "must lie in (0, 1]",
                     ));
                 }
                 if p.periods == 0 || p.periods > crate::window::MAX_PERIODS {
-                    return Err(format!(
-                        "tuner.periods = {} must lie in 1..={}",
-                        p.periods,
-                        crate::window::MAX_PERIODS
+                    return Err(ConfigError::setting(
+                        "tuner.periods",
+                        p.periods as f64,
+                        format!("must lie in 1..={}", crate::window::MAX_PERIODS),
                     ));
                 }
                 if !(p.max_log_step.is_finite() && p.max_log_step > 0.0) {
-                    return Err(format!(
-                        "tuner.max_log_step = {} must be > 0",
-                        p.max_log_step
+                    return Err(ConfigError::setting(
+                        "tuner.max_log_step",
+                        p.max_log_step,
+                        "must be > 0",
                     ));
                 }
                 if !(p.adapt_gain.is_finite() && p.adapt_gain > 0.0 && p.adapt_gain <= 1.0) {
-                    return Err(format!(
-                        "tuner.adapt_gain = {} must lie in (0, 1]",
-                        p.adapt_gain
+                    return Err(ConfigError::setting(
+                        "tuner.adapt_gain",
+                        p.adapt_gain,
+                        "must lie in (0, 1]",
                     ));
                 }
                 Ok(())

@@ -1,6 +1,7 @@
 //! Chapter 4 experiments: friction identification and friction suppression by tuned dither.
 
 use super::*;
+use crate::error::ExperimentError;
 use crate::friction::{FrictionLaw, RoughnessMap};
 use crate::ident::{
     CoefficientFit, FrictionFit, THESIS_FIG_4_6, fit_friction_coefficient, fit_friction_law,
@@ -78,7 +79,7 @@ pub struct FrictionIdSummary {
 /// between the tares around it: the viscous term F_v·v is only ~1 % of the friction at
 /// 200 mm/s, so a drift of a few mN would otherwise swamp it. Fast levels repeat their strokes
 /// so each level gathers at least 2 s of cruise, 40 s from 40 mm/s up.
-pub fn friction_id(opts: &Options) -> Result<Outcome<FrictionIdSummary>, String> {
+pub fn friction_id(opts: &Options) -> Result<Outcome<FrictionIdSummary>, ExperimentError> {
     struct Stroke {
         t_mid: f64,
         force: crate::math::Vec2,
@@ -192,7 +193,7 @@ pub fn friction_id(opts: &Options) -> Result<Outcome<FrictionIdSummary>, String>
         }
     }
     let data: Vec<(f64, f64)> = levels.iter().map(|p| (p[0], p[1])).collect();
-    let fit = fit_friction_law(&data).map_err(|e| format!("friction-id: {e}"))?;
+    let fit = fit_friction_law(&data).map_err(|e| ExperimentError::no_result("friction-id", e))?;
     let rel = |a: f64, b: f64| (a - b) / b;
     let relative_error = [
         rel(fit.law.kinetic_n, truth.kinetic_n),
@@ -282,7 +283,7 @@ pub struct Fig45Summary {
 
 /// The same 6 s traverse at 10 mm/s over a surface with seeded rough patches, once without
 /// dither and once with Aω = 5ẋ_o (statistics over whole dither periods from 1 s to 6 s).
-pub fn fig4_5(opts: &Options) -> Result<Outcome<Fig45Summary>, String> {
+pub fn fig4_5(opts: &Options) -> Result<Outcome<Fig45Summary>, ExperimentError> {
     let v = 0.01;
     let duration = 6.0;
     let ratio = 5.0;
@@ -390,7 +391,7 @@ pub struct Fig46Summary {
 
 /// μ from six trials at the thesis's normal forces (1.75–5.26 N), each a ± stroke pair at
 /// 20 mm/s without dither; or, with `thesis_table`, from the six trials printed in fig. 4.6.
-pub fn fig4_6(opts: &Options) -> Result<Outcome<Fig46Summary>, String> {
+pub fn fig4_6(opts: &Options) -> Result<Outcome<Fig46Summary>, ExperimentError> {
     let (trials, simulated, true_mu, speed) = if opts.thesis_table {
         (
             THESIS_FIG_4_6
@@ -434,7 +435,8 @@ pub fn fig4_6(opts: &Options) -> Result<Outcome<Fig46Summary>, String> {
         (trials, sim.time(), Some(mu), Some(speed))
     };
     let pairs: Vec<(f64, f64)> = trials.iter().map(|p| (p[0], p[1])).collect();
-    let fit = fit_friction_coefficient(&pairs).map_err(|e| format!("fig4.6: {e}"))?;
+    let fit =
+        fit_friction_coefficient(&pairs).map_err(|e| ExperimentError::no_result("fig4.6", e))?;
     let relative_error = true_mu.map(|m| (fit.mu - m) / m);
     let mut checks = Vec::new();
     if let Some(e) = relative_error {
@@ -527,7 +529,7 @@ pub struct Fig47Summary {
 
 /// At a low nominal velocity (2 mm/s) the dither amplitude is raised every second, 0 to 2 mm;
 /// the oscillation of the tangential force is measured per step and compared with the model.
-pub fn fig4_7(opts: &Options) -> Result<Outcome<Fig47Summary>, String> {
+pub fn fig4_7(opts: &Options) -> Result<Outcome<Fig47Summary>, ExperimentError> {
     let v = 0.002;
     let amplitudes = [0.0, 0.25e-3, 0.5e-3, 0.75e-3, 1.0e-3, 1.5e-3, 2.0e-3];
     let mut cfg = config(opts, TunerConfig::Fixed);
@@ -691,7 +693,7 @@ pub struct Fig48Summary {
 
 /// Each tuner runs on the same 6.5 s traverse at 10 mm/s: 0.5 s at Aω = 0.2 ẋ_o (the starting
 /// value), then tuning on line.
-pub fn fig4_8(opts: &Options) -> Result<Outcome<Fig48Summary>, String> {
+pub fn fig4_8(opts: &Options) -> Result<Outcome<Fig48Summary>, ExperimentError> {
     let v = 0.01;
     let duration = 6.5;
     let t_tune = 0.5;

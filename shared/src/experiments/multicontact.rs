@@ -2,6 +2,7 @@
 //! estimated instantaneous centre of rotation.
 
 use super::*;
+use crate::error::ExperimentError;
 use crate::math::{Vec2, cross};
 use crate::multicontact::{BoxParams, BoxPlant, Pose, estimate_rotation_centre, friction_filter};
 use crate::sensor::{SensorModel, SensorParams, Wrench};
@@ -130,7 +131,7 @@ fn rotate_about(pose: Pose, centre: Vec2, angle: f64) -> Pose {
 /// about P̂ and P̂ + 10 mm at ±45° (the thesis's unsigned form needs dither centres displaced
 /// in both x and y: a centre moved along x alone says nothing about P_y). Sensor noise
 /// σ = 0.02 N.
-pub fn fig5_9(opts: &Options) -> Result<Outcome<Fig59Summary>, String> {
+pub fn fig5_9(opts: &Options) -> Result<Outcome<Fig59Summary>, ExperimentError> {
     let params = BoxParams::default();
     let size = params.size_m[0].max(params.size_m[1]);
     let tilt0 = 20f64.to_radians();
@@ -218,7 +219,10 @@ pub fn fig5_9(opts: &Options) -> Result<Outcome<Fig59Summary>, String> {
             .flat_map(|(k, rec)| rec.iter().map(move |&(t, ph, f, _, _)| (k, t, ph, f)))
             .collect();
         let Some(fit) = estimate_rotation_centre(&centres, &flat, amp, supp_hz) else {
-            return Err("the rotation-centre estimate is singular".into());
+            return Err(ExperimentError::no_result(
+                "fig5.9",
+                "the rotation-centre estimate is singular",
+            ));
         };
         let (est, a_fit, thesis) = (fit.centre, fit.response_matrix, fit.thesis_centre);
         // Friction filter on the mean wrench of the first dither: moments about R = the corner.

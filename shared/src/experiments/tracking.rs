@@ -1,6 +1,7 @@
 //! Chapter 5 experiments: tangent estimation by dither, surface tracking, corners.
 
 use super::*;
+use crate::error::ExperimentError;
 use crate::friction::FrictionLaw;
 use crate::sim::{EstimateLog, Lockstep, SimConfig};
 use crate::tangent::TangentOutcome;
@@ -98,7 +99,7 @@ fn outcome_name(o: &TangentOutcome) -> &'static str {
 pub(crate) fn estimate_once(
     cfg: &SimConfig,
     a_omega: f64,
-) -> Result<(Vec<EstimateLog>, f64), String> {
+) -> Result<(Vec<EstimateLog>, f64), ExperimentError> {
     let mut sim = Lockstep::new(cfg)?;
     sim.servo_mut().set_a_omega(a_omega);
     sim.run((0.3 / sim.dt()) as usize);
@@ -114,12 +115,16 @@ pub(crate) fn estimate_once(
     Ok((sim.estimates().to_vec(), sim.time() - t0))
 }
 
-fn trial(cfg: &SimConfig, alpha0_deg: f64, a_omega: f64) -> Result<TangentTrial, String> {
+fn trial(cfg: &SimConfig, alpha0_deg: f64, a_omega: f64) -> Result<TangentTrial, ExperimentError> {
     let mut cfg = cfg.clone();
     cfg.tangent_error_rad = alpha0_deg.to_radians();
     let (logs, duration) = estimate_once(&cfg, a_omega)?;
-    let first = logs.first().ok_or("the estimation never finished")?;
-    let last = logs.last().ok_or("the estimation never finished")?;
+    let first = logs
+        .first()
+        .ok_or_else(|| ExperimentError::no_result("tangent", "the estimation never finished"))?;
+    let last = logs
+        .last()
+        .ok_or_else(|| ExperimentError::no_result("tangent", "the estimation never finished"))?;
     // The thesis formulas answer α0 from the first two strokes; compare each with the true
     // α0 = base − true angle.
     let cross_check = |pick: fn(&crate::tangent::TangentEstimate) -> Option<f64>| {
@@ -167,7 +172,7 @@ fn trial(cfg: &SimConfig, alpha0_deg: f64, a_omega: f64) -> Result<TangentTrial,
 /// Tangent estimation on a flat surface for α0 from −15° to +15° in three cases: no friction;
 /// eq. 4.23 friction with the friction-suppression dither running (Aω = 50 mm/s); eq. 4.23
 /// friction without dither. Plus a sensor-noise sweep. Stroke 1 mm at 1 Hz, k_e = 10e3 N/m.
-pub fn tangent(opts: &Options) -> Result<Outcome<TangentSummary>, String> {
+pub fn tangent(opts: &Options) -> Result<Outcome<TangentSummary>, ExperimentError> {
     let base = config(opts, TunerConfig::Fixed);
     let p = base.servo.tangent;
     let angles: Vec<f64> = (-15..=15).map(f64::from).collect();
@@ -319,7 +324,7 @@ pub(crate) fn run_tracking(
     u_end: f64,
     a_omega: f64,
     time_limit: f64,
-) -> Result<TrackingRun, String> {
+) -> Result<TrackingRun, ExperimentError> {
     use crate::scenario::{MonitorTick, TrackingMonitor, plant_sample, servo_sample};
     let mut cfg = cfg.clone();
     cfg.servo.tracking.enabled = true;
@@ -435,7 +440,7 @@ pub struct Fig56Summary {
 /// ±9°), one wavelength centred on the arm's operating point at 5 mm/s with the
 /// friction-suppression dither at 5 ẋ_o, sensor noise σ = 0.02 N; the controller starts with
 /// the true tangent and re-estimates when a force limit trips.
-pub fn fig5_6(opts: &Options) -> Result<Outcome<Fig56Summary>, String> {
+pub fn fig5_6(opts: &Options) -> Result<Outcome<Fig56Summary>, ExperimentError> {
     let (amp, wl, v) = (0.003, 0.12, 0.005);
     let mut cfg = config(opts, TunerConfig::Fixed);
     let origin = cfg.surface.frame.origin_m;
@@ -561,7 +566,7 @@ pub(crate) fn on_corner_profile(cfg: &mut SimConfig) -> (Vec<[f64; 2]>, f64) {
 /// Tracks the piecewise-linear profile through its four corners at 5 mm/s with the
 /// friction-suppression dither at 5 ẋ_o; reports per corner how it was detected (force limit or
 /// set-point drift), how far past it the tangent was re-acquired, and the worst transient.
-pub fn corners(opts: &Options) -> Result<Outcome<CornersSummary>, String> {
+pub fn corners(opts: &Options) -> Result<Outcome<CornersSummary>, ExperimentError> {
     let v = 0.005;
     let mut cfg = config(opts, TunerConfig::Fixed);
     let (vertices, end) = on_corner_profile(&mut cfg);
@@ -688,7 +693,7 @@ pub(crate) fn run_correlation(
     velocity: f64,
     u_end: f64,
     a_omega: f64,
-) -> Result<(TrackingRun, Vec<f64>), String> {
+) -> Result<(TrackingRun, Vec<f64>), ExperimentError> {
     let preload = cfg.servo.hybrid.preload_n;
     let mut sim = Lockstep::new(cfg)?;
     let dt = sim.dt();
@@ -803,7 +808,7 @@ pub struct Fig53Summary {
 /// The preliminary correlation method (eqs. 5.1–5.4) against the dither method on the corner
 /// profile of `corners` (fig. 5.3: the thesis's preliminary method failed on discrete changes
 /// of the tangent, even from an initial estimate within 10 %).
-pub fn fig5_3(opts: &Options) -> Result<Outcome<Fig53Summary>, String> {
+pub fn fig5_3(opts: &Options) -> Result<Outcome<Fig53Summary>, ExperimentError> {
     let v = 0.005;
     let mut cfg = config(opts, TunerConfig::Fixed);
     let (vertices, end) = on_corner_profile(&mut cfg);
