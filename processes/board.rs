@@ -4,7 +4,7 @@
 use crate::experiment::load_config;
 use crate::ipc::{self, Svc};
 use crate::rt;
-use afs_shared::msg::{self, BoardStartup};
+use afs_shared::msg::{self, Board, BoardStartup};
 use afs_shared::scenario::Scenario;
 use afs_shared::sim::SimConfig;
 use anyhow::Result;
@@ -78,13 +78,13 @@ pub struct Startup {
 }
 
 impl Startup {
-    /// Starts the clock of `board` (a `msg::BOARD_*` code) at `main_ns`, the time `main` was
+    /// Starts the clock of `board`  at `main_ns`, the time `main` was
     /// entered.
-    pub fn new(board: u32, main_ns: u64) -> Self {
+    pub fn new(board: Board, main_ns: u64) -> Self {
         Self {
             report: BoardStartup {
                 version: msg::VERSION,
-                board,
+                board: board.into(),
                 pid: std::process::id() as i32,
                 main_ns,
                 ..Default::default()

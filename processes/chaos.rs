@@ -13,7 +13,7 @@ use crate::ipc::Svc;
 use crate::rt;
 use crate::supervisor::Timeline;
 use afs_shared::faults::{BadSample, Board, FaultKind, PlannedFault};
-use afs_shared::msg::{WRENCH_INJECTED, WrenchSample};
+use afs_shared::msg::{WrenchFlags, WrenchSample};
 use afs_shared::servo::ServoMode;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::update_connections::UpdateConnections;
@@ -470,7 +470,7 @@ impl Injector {
         for kind in BadSample::ALL {
             let now = rt::monotonic_ns();
             let mut s = *g;
-            s.flags |= WRENCH_INJECTED;
+            s.flags |= WrenchFlags::INJECTED;
             s.publish_ns = now;
             match kind {
                 BadSample::Nan => s.force_n[0] = f64::NAN,

@@ -12,7 +12,7 @@ use crate::rt;
 use afs_shared::ident::OnlineFrictionId;
 use afs_shared::math::Vec2;
 use afs_shared::msg::{
-    self, FRICTION_LAW_VALID, FRICTION_MU_VALID, FrictionReport, RotationResponse, TangentResponse,
+    self, FrictionReport, FrictionStatus, Outcome, RotationResponse, TangentResponse,
 };
 use afs_shared::multicontact::estimate_rotation_centre;
 use afs_shared::scenario::ident_tick;
@@ -122,7 +122,7 @@ pub fn run(prefix: &str, mut startup: Startup, stop: &AtomicBool) -> Result<Esti
             let mut r = RotationResponse {
                 version: msg::VERSION,
                 request_id: h.request_id,
-                outcome: 3,
+                outcome: Outcome::BadRequest.into(),
                 centre_m: [f64::NAN; 2],
                 thesis_centre_m: [f64::NAN; 2],
                 response_matrix: [f64::NAN; 4],
@@ -146,11 +146,11 @@ pub fn run(prefix: &str, mut startup: Startup, stop: &AtomicBool) -> Result<Esti
                         )
                     })
                     .collect();
-                r.outcome = 2;
+                r.outcome = Outcome::Failed.into();
                 if let Some(e) =
                     estimate_rotation_centre(&centres, &samples, h.amplitude_rad, h.suppression_hz)
                 {
-                    r.outcome = 0;
+                    r.outcome = Outcome::Estimate.into();
                     r.centre_m = [e.centre.x, e.centre.y];
                     if let Some(t) = e.thesis_centre {
                         r.thesis_centre_m = [t.x, t.y];
@@ -174,14 +174,14 @@ pub fn run(prefix: &str, mut startup: Startup, stop: &AtomicBool) -> Result<Esti
             report.seq += 1;
             report.windows = id.windows as u64;
             report.speeds = u32::try_from(id.speeds).unwrap_or(u32::MAX);
-            report.status = 0;
+            report.status = FrictionStatus::empty();
             if let Some((mu, sd)) = id.mu {
-                report.status |= FRICTION_MU_VALID;
+                report.status |= FrictionStatus::MU_VALID;
                 report.mu = mu;
                 report.mu_std = sd;
             }
             if let Some(f) = id.fit {
-                report.status |= FRICTION_LAW_VALID;
+                report.status |= FrictionStatus::LAW_VALID;
                 report.kinetic_n = f.law.kinetic_n;
                 report.viscous_n_s_per_m = f.law.viscous_n_s_per_m;
                 report.stribeck_n = f.law.stribeck_n;

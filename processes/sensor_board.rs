@@ -9,7 +9,7 @@
 use crate::board::Startup;
 use crate::ipc;
 use crate::rt;
-use afs_shared::msg::{self, PlantSample, WRENCH_SATURATED, WrenchSample};
+use afs_shared::msg::{self, Board, PlantSample, WrenchFlags, WrenchSample};
 use afs_shared::sensor::SensorModel;
 use afs_shared::sensor::SensorParams;
 use anyhow::Result;
@@ -44,7 +44,7 @@ pub struct SensorSummary {
 /// Runs until `stop` is set.
 pub fn run(args: &SensorArgs, stop: &AtomicBool) -> Result<SensorSummary> {
     args.params.validate().map_err(anyhow::Error::msg)?;
-    let mut startup = Startup::new(msg::BOARD_SENSOR, args.main_ns);
+    let mut startup = Startup::new(Board::Sensor, args.main_ns);
     let node = ipc::node(&args.prefix, "sensor")?;
     startup.report.node_ns = Startup::now();
     let plant_sub = ipc::plant(&node)?
@@ -98,7 +98,11 @@ pub fn run(args: &SensorArgs, stop: &AtomicBool) -> Result<SensorSummary> {
             let r = model.sample(p.sensor_wrench());
             let mut w = WrenchSample {
                 version: msg::VERSION,
-                flags: if r.saturated { WRENCH_SATURATED } else { 0 },
+                flags: if r.saturated {
+                    WrenchFlags::SATURATED
+                } else {
+                    WrenchFlags::empty()
+                },
                 seq,
                 epoch_ns,
                 plant_seq: p.seq,

@@ -12,8 +12,8 @@ use crate::board::Startup;
 use crate::ipc::{self, Svc};
 use crate::{hist, rt};
 use afs_shared::msg::{
-    self, LoopStats, PlantSample, Quantiles, SERVO_FORCE_VALID, STATS_MLOCKED, STATS_PINNED,
-    STATS_SCHED_FIFO, TangentRequestHeader, TangentResponse, WorldSnapshot,
+    self, Board, Command, LoopFlags, LoopStats, PlantSample, Quantiles, ServoFlags,
+    TangentRequestHeader, TangentResponse, WorldSnapshot,
 };
 use afs_shared::plant::{Plant, PlantState};
 use afs_shared::scenario::{self, DriverMemo, DriverState, Scenario};
@@ -258,7 +258,7 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
         scenario.natural_duration_s
     };
 
-    let mut startup = Startup::new(msg::BOARD_SERVO, args.main_ns);
+    let mut startup = Startup::new(Board::Servo, args.main_ns);
     let node = ipc::node(&args.prefix, "servo")?;
     startup.report.node_ns = Startup::now();
     let plant_pub = ipc::plant(&node)?
@@ -473,9 +473,10 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
     for w in &rtr.warnings {
         eprintln!("afs-servo: warning: {w}");
     }
-    let flags = (if rtr.fifo { STATS_SCHED_FIFO } else { 0 })
-        | (if rtr.mlocked { STATS_MLOCKED } else { 0 })
-        | (if rtr.pinned { STATS_PINNED } else { 0 });
+    let mut flags = LoopFlags::empty();
+    flags.set(LoopFlags::SCHED_FIFO, rtr.fifo);
+    flags.set(LoopFlags::MLOCKED, rtr.mlocked);
+    flags.set(LoopFlags::PINNED, rtr.pinned);
 
     let mut stats = LoopStats {
         version: msg::VERSION,
@@ -543,7 +544,9 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
         while let Ok(Some(c)) = command_sub.receive() {
             let c = *c.payload();
             stats.commands += 1;
-            if c.version == msg::VERSION && c.command == msg::COMMAND_ESTIMATE_TANGENT {
+            if c.version == msg::VERSION
+                && Command::try_from(c.command) == Ok(Command::EstimateTangent)
+            {
                 estimate_wanted = Some(c.started_before);
             } else {
                 stats.bad_commands += 1;
@@ -570,7 +573,7 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
         let mut s = scenario::servo_sample(&servo, seq, now, plant.time());
         s.safe_reason = safe_reason;
         if let Some((w, age)) = used {
-            s.flags |= SERVO_FORCE_VALID;
+            s.flags |= ServoFlags::FORCE_VALID;
             s.wrench_seq = w.seq;
             s.wrench_sample_ns = w.sample_ns;
             s.force_age_ns = age;

@@ -13,8 +13,8 @@ use crate::record::{Rec, RecordSummary, Recorder};
 use crate::rt;
 use afs_shared::faults::{self, Board, FaultFigures, FaultKind, FaultMonitor};
 use afs_shared::msg::{
-    self, BoardStartup, FRICTION_LAW_VALID, FRICTION_MU_VALID, FrictionReport, LoopStats,
-    PlantSample, ProcessStatus, ServoCommand, ServoSample, SupervisorStatus, WRENCH_INJECTED,
+    self, BoardStartup, FrictionReport, FrictionStatus, LoopFlags, LoopStats, PlantSample,
+    ProcessState, ProcessStatus, ServoCommand, ServoSample, SupervisorStatus, WrenchFlags,
     WrenchSample, fixed_str,
 };
 use afs_shared::scenario::{self, Agreement, Scenario, ScenarioReport};
@@ -251,14 +251,6 @@ fn resolve_binary(name: &str) -> Result<PathBuf> {
     )
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum ProcState {
-    Running,
-    Waiting,
-    Exited,
-    Failed,
-}
-
 #[derive(Debug, Clone, Serialize)]
 struct ExitRecord {
     at_s: f64,
@@ -330,7 +322,7 @@ struct Proc {
     spec: ProcessSpec,
     path: PathBuf,
     child: Option<Child>,
-    state: ProcState,
+    state: ProcessState,
     restarts: u32,
     restart_at: Option<Instant>,
     last_exit: Option<i32>,
@@ -395,7 +387,7 @@ impl Footprint {
         let files = ipc::leftovers(prefix);
         let boards_rss_kib = procs
             .iter()
-            .filter(|p| p.state == ProcState::Running)
+            .filter(|p| p.state == ProcessState::Running)
             .map(|p| rss_kib(p.pid()))
             .fold(Rss::default(), |a, b| a + b);
         let stale = ipc::stale_files(prefix).unwrap_or_default();
@@ -516,7 +508,7 @@ impl Proc {
         let spawned_ns = rt::monotonic_ns();
         let pid = child.id() as i32;
         self.child = Some(child);
-        self.state = ProcState::Running;
+        self.state = ProcessState::Running;
         self.started = Instant::now();
         self.held = false;
         self.data_since = None;
@@ -566,7 +558,7 @@ impl Proc {
 
     fn view(&self) -> BoardView {
         BoardView {
-            pid: if self.state == ProcState::Running {
+            pid: if self.state == ProcessState::Running {
                 self.pid()
             } else {
                 0
@@ -615,7 +607,7 @@ impl Proc {
                 }
             }
         }
-        self.state = ProcState::Exited;
+        self.state = ProcessState::Exited;
     }
 }
 
@@ -721,9 +713,9 @@ pub fn loop_stats_json(s: &LoopStats) -> Value {
         "ticks": s.ticks,
         "period_us": s.period_ns as f64 / 1000.0,
         "misses": s.misses,
-        "sched_fifo": s.flags & msg::STATS_SCHED_FIFO != 0,
-        "mlocked": s.flags & msg::STATS_MLOCKED != 0,
-        "pinned": s.flags & msg::STATS_PINNED != 0,
+        "sched_fifo": s.flags.contains(LoopFlags::SCHED_FIFO),
+        "mlocked": s.flags.contains(LoopFlags::MLOCKED),
+        "pinned": s.flags.contains(LoopFlags::PINNED),
         "wake_jitter_us": quantiles_us(&s.wake_latency),
         "exec_us": quantiles_us(&s.exec),
         "force_age_us": quantiles_us(&s.force_age),
@@ -746,8 +738,8 @@ fn friction_json(f: &FrictionReport) -> Value {
     json!({
         "windows": f.windows,
         "speeds": f.speeds,
-        "mu_valid": f.status & FRICTION_MU_VALID != 0,
-        "law_valid": f.status & FRICTION_LAW_VALID != 0,
+        "mu_valid": f.status.contains(FrictionStatus::MU_VALID),
+        "law_valid": f.status.contains(FrictionStatus::LAW_VALID),
         "mu": num(f.mu),
         "mu_std": num(f.mu_std),
         "kinetic_n": num(f.kinetic_n),
@@ -797,7 +789,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunOutcome> {
             path: resolve_binary(&spec.binary)?,
             spec: spec.clone(),
             child: None,
-            state: ProcState::Waiting,
+            state: ProcessState::Starting,
             restarts: 0,
             restart_at: None,
             last_exit: None,
@@ -1001,7 +993,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunOutcome> {
             name: "processes that gave up (restart limit)".into(),
             value: procs
                 .iter()
-                .filter(|p| p.state == ProcState::Failed)
+                .filter(|p| p.state == ProcessState::Failed)
                 .count() as f64,
             relation: "<=",
             limit: 0.0,
@@ -1060,7 +1052,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunOutcome> {
                     name: "friction coefficient identified".into(),
                     value: f64::from(
                         run.friction
-                            .is_some_and(|f| f.status & FRICTION_MU_VALID != 0),
+                            .is_some_and(|f| f.status.contains(FrictionStatus::MU_VALID)),
                     ),
                     relation: ">=",
                     limit: 1.0,
@@ -1123,7 +1115,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunOutcome> {
             "name": p.spec.name,
             "restarts": p.restarts,
             "stalls_killed": p.stalls,
-            "gave_up": p.state == ProcState::Failed,
+            "gave_up": p.state == ProcessState::Failed,
             "first_start": p.first_start,
             "exits": p.exits,
         })).collect::<Vec<_>>(),
@@ -1471,7 +1463,10 @@ fn supervise(
             p.spawn(launch, false)?;
         }
     }
-    for p in procs.iter_mut().filter(|p| p.state == ProcState::Waiting) {
+    for p in procs
+        .iter_mut()
+        .filter(|p| p.state == ProcessState::Starting)
+    {
         p.spawn(launch, false)?;
     }
     let tty = std::io::stderr().is_terminal();
@@ -1501,7 +1496,7 @@ fn supervise(
             last_plant_at = Instant::now();
             if let Some(sv) = procs.iter_mut().find(|q| q.spec.name == "servo")
                 && sv.data_since.is_none()
-                && sv.state == ProcState::Running
+                && sv.state == ProcessState::Running
             {
                 // A restarted servo's first sample is its predecessor's last tick again (from
                 // the snapshot it resumes): its own ticks, and the world going on, start at the
@@ -1546,14 +1541,14 @@ fn supervise(
         while let Ok(Some(s)) = ports.wrench.receive() {
             let w = *s.payload();
             out.wrench_received += 1;
-            if w.flags & WRENCH_INJECTED == 0 {
+            if !w.flags.contains(WrenchFlags::INJECTED) {
                 last_wrench_at = Instant::now();
                 let new_epoch = genuine.is_none_or(|g| w.epoch_ns != g.epoch_ns);
                 genuine = Some(w);
                 if new_epoch
                     && let Some(sn) = procs
                         .iter_mut()
-                        .find(|q| q.spec.name == "sensor" && q.state == ProcState::Running)
+                        .find(|q| q.spec.name == "sensor" && q.state == ProcessState::Running)
                 {
                     sn.data_flowing(last_wrench_at, rt::monotonic_ns());
                 }
@@ -1566,7 +1561,7 @@ fn supervise(
             let r = *s.payload();
             if let Some(p) = procs
                 .iter_mut()
-                .find(|p| p.state == ProcState::Running && p.pid() == r.pid)
+                .find(|p| p.state == ProcessState::Running && p.pid() == r.pid)
             {
                 p.started_up(&r);
                 // The estimator has no stream of its own: it serves once its ports are open.
@@ -1636,7 +1631,7 @@ fn supervise(
                         command_seq += 1;
                         let _ = ports.command.send_copy(ServoCommand {
                             version: msg::VERSION,
-                            command: msg::COMMAND_ESTIMATE_TANGENT,
+                            command: msg::Command::EstimateTangent.into(),
                             seq: command_seq,
                             publish_ns: rt::monotonic_ns(),
                             started_before,
@@ -1652,7 +1647,7 @@ fn supervise(
         let at_s = t0.elapsed().as_secs_f64();
         let mut servo_done = false;
         for p in procs.iter_mut() {
-            if p.state == ProcState::Running {
+            if p.state == ProcessState::Running {
                 let exited = p.child.as_mut().and_then(|c| c.try_wait().ok().flatten());
                 if let Some(st) = exited {
                     let seen_ns = rt::monotonic_ns();
@@ -1683,7 +1678,7 @@ fn supervise(
                     };
                     if servo_finished {
                         servo_done = true;
-                        p.state = ProcState::Exited;
+                        p.state = ProcessState::Exited;
                         p.exits.push(record);
                         continue;
                     }
@@ -1700,14 +1695,14 @@ fn supervise(
                         let backoff = (p.spec.backoff_ms << p.streak.min(6)).min(2000);
                         timeline.backoff_ms = Some(backoff as f64);
                         p.streak += 1;
-                        p.state = ProcState::Waiting;
+                        p.state = ProcessState::Restarting;
                         p.restart_at = Some(now + Duration::from_millis(backoff));
                         record.restart = Some(timeline);
                     } else {
                         p.state = if ok {
-                            ProcState::Exited
+                            ProcessState::Exited
                         } else {
-                            ProcState::Failed
+                            ProcessState::Failed
                         };
                         eprintln!(
                             "afs: {} ended ({}) and will not be restarted",
@@ -1746,7 +1741,8 @@ fn supervise(
                         p.held = true;
                     }
                 }
-            } else if p.state == ProcState::Waiting && p.restart_at.is_some_and(|t| now >= t) {
+            } else if p.state == ProcessState::Restarting && p.restart_at.is_some_and(|t| now >= t)
+            {
                 p.restarts += 1;
                 p.restart_at = None;
                 let resume = p.spec.name == "servo";
@@ -1755,7 +1751,7 @@ fn supervise(
                 }
                 if let Err(e) = p.spawn(launch, resume) {
                     eprintln!("afs: restarting {}: {e:#}", p.spec.name);
-                    p.state = ProcState::Failed;
+                    p.state = ProcessState::Failed;
                 } else {
                     // Give the new process its own start-up grace before stall checks.
                     match p.spec.name.as_str() {
@@ -1773,7 +1769,7 @@ fn supervise(
         }
         if procs
             .iter()
-            .any(|p| p.spec.name == "servo" && p.state == ProcState::Failed)
+            .any(|p| p.spec.name == "servo" && p.state == ProcessState::Failed)
         {
             break;
         }
@@ -1794,7 +1790,7 @@ fn supervise(
                 seq: status_seq,
                 publish_ns: rt::monotonic_ns(),
                 pid: std::process::id() as i32,
-                phase: 1,
+                phase: msg::SupervisorPhase::Running.into(),
                 scenario: fixed_str(launch.scenario),
                 elapsed_s: last_time_s,
                 duration_s: duration,
@@ -1804,12 +1800,7 @@ fn supervise(
                 st.processes[i] = ProcessStatus {
                     name: fixed_str(&p.spec.name),
                     pid: p.pid(),
-                    state: match p.state {
-                        ProcState::Running => 1,
-                        ProcState::Waiting => 2,
-                        ProcState::Exited => 3,
-                        ProcState::Failed => 4,
-                    },
+                    state: p.state.into(),
                     restarts: p.restarts,
                     last_exit: p.last_exit.unwrap_or(i32::MIN),
                 };
@@ -1908,10 +1899,7 @@ pub fn status(prefix: &str, wait: Duration) -> Result<Value> {
         st.processes[..(st.process_count as usize).min(msg::MAX_PROCESSES)]
             .iter()
             .map(|p| {
-                let state = ["starting", "running", "restarting", "exited", "failed"]
-                    .get(p.state as usize)
-                    .copied()
-                    .unwrap_or("?");
+                let state = ProcessState::try_from(p.state).ok();
                 json!({
                     "name": msg::str_of(&p.name),
                     "pid": p.pid,

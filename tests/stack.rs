@@ -319,8 +319,7 @@ fn the_estimator_board_answers_requests() {
     use afs::ipc;
     use afs_shared::math::Vec2;
     use afs_shared::msg::{
-        self, OUTCOME_BAD_REQUEST, OUTCOME_ESTIMATE, RotationRequestHeader, RotationSample,
-        TangentRequestHeader,
+        self, Outcome, RotationRequestHeader, RotationSample, TangentRequestHeader,
     };
     use afs_shared::tangent::{ProbeModel, TangentParams};
     use iceoryx2::service::port_factory::PortFactory;
@@ -389,7 +388,7 @@ fn the_estimator_board_answers_requests() {
         ..Default::default()
     };
     let r = ask(header);
-    assert_eq!(r.outcome, OUTCOME_ESTIMATE, "{r:?}");
+    assert_eq!(Outcome::try_from(r.outcome), Ok(Outcome::Estimate), "{r:?}");
     assert_eq!(r.request_id, 7);
     assert!(
         (r.alpha0_rad - alpha0).abs() < 1e-3,
@@ -400,7 +399,10 @@ fn the_estimator_board_answers_requests() {
     bad.request_id = 8;
     bad.params.amplitude_m = f64::NAN;
     let r = ask(bad);
-    assert_eq!((r.outcome, r.request_id), (OUTCOME_BAD_REQUEST, 8));
+    assert_eq!(
+        (Outcome::try_from(r.outcome), r.request_id),
+        (Ok(Outcome::BadRequest), 8)
+    );
 
     // Rotation centre: responses g(c) = −K J (P − c) with a diagonal K, three dithers.
     let rclient = rotation_service

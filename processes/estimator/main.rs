@@ -17,7 +17,7 @@ struct Cli {
 }
 
 fn main() -> ExitCode {
-    let mut startup = Startup::new(afs_shared::msg::BOARD_ESTIMATOR, afs::rt::monotonic_ns());
+    let mut startup = Startup::new(afs_shared::msg::Board::Estimator, afs::rt::monotonic_ns());
     let cli = Cli::parse();
     let result = (|| {
         afs::ipc::check_prefix(&cli.common.prefix)?;

@@ -3,33 +3,11 @@
 //! each tick, as the supervisor receives them).
 
 use crate::error::UnknownName;
-use crate::msg::{PlantSample, SERVO_FORCE_VALID, SERVO_SAFE, ServoSample};
+pub use crate::msg::Board;
+use crate::msg::{PlantSample, ServoFlags, ServoSample};
 use rand_chacha::ChaCha8Rng;
 use rand_chacha::rand_core::{Rng, SeedableRng};
 use serde::Serialize;
-
-/// A board of the stack.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Board {
-    /// The plant/servo board.
-    Servo,
-    /// The force-sensor board.
-    Sensor,
-    /// The estimator board.
-    Estimator,
-}
-
-impl Board {
-    /// The process name in the stack file.
-    pub fn name(self) -> &'static str {
-        match self {
-            Board::Servo => "servo",
-            Board::Sensor => "sensor",
-            Board::Estimator => "estimator",
-        }
-    }
-}
 
 /// What to inject.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -431,7 +409,7 @@ impl FaultMonitor {
 
     /// One tick's samples (the same tick).
     pub fn push(&mut self, p: &PlantSample, s: &ServoSample) {
-        let safe = s.flags & SERVO_SAFE != 0;
+        let safe = s.flags.contains(ServoFlags::SAFE);
         if let Some(prev) = self.last_tick_ns {
             self.gap_since_good_ns = self.gap_since_good_ns.max(s.tick_ns.saturating_sub(prev));
         }
@@ -451,7 +429,7 @@ impl FaultMonitor {
             }
         }
         self.was_safe = safe;
-        if s.flags & SERVO_FORCE_VALID != 0 {
+        if s.flags.contains(ServoFlags::FORCE_VALID) {
             self.last_good_ns = Some(s.wrench_sample_ns);
             self.gap_since_good_ns = 0;
         }
@@ -517,7 +495,15 @@ mod tests {
         let s = ServoSample {
             seq,
             tick_ns,
-            flags: if valid { SERVO_FORCE_VALID } else { 0 } | if safe { SERVO_SAFE } else { 0 },
+            flags: if valid {
+                ServoFlags::FORCE_VALID
+            } else {
+                ServoFlags::empty()
+            } | if safe {
+                ServoFlags::SAFE
+            } else {
+                ServoFlags::empty()
+            },
             wrench_sample_ns: wrench_ns,
             normal_force_n: 2.5,
             tangential_force_n: -1.0,

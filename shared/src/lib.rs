@@ -1,6 +1,9 @@
 //! afs-shared: the pure, deterministic core of afs.
 #![warn(missing_docs)]
 
+#[macro_use]
+mod wire;
+
 pub mod arm;
 pub mod correlation;
 pub mod dither;

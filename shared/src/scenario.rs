@@ -11,7 +11,7 @@
 
 use crate::error::{ScenarioError, UnknownName};
 use crate::experiments::{Tick, WindowSummary, on_corner_profile, sliding_periods, window};
-use crate::msg::{self, PlantSample, SERVO_SAFE, ServoSample};
+use crate::msg::{self, PlantSample, ServoFlags, ServoSample};
 use crate::plant::PlantTruth;
 use crate::servo::{EstimationCounters, ServoCore, ServoMode};
 use crate::sim::{Lockstep, SimConfig};
@@ -316,8 +316,8 @@ pub fn ident_tick(s: &ServoSample) -> crate::ident::IdentTick {
         normal_force: s.normal_force_n,
         tangent_velocity: s.tangent_velocity_m_per_s,
         tracking: ServoMode::try_from(s.mode) == Ok(ServoMode::Track)
-            && s.flags & SERVO_SAFE == 0
-            && s.flags & msg::SERVO_FORCE_VALID != 0,
+            && !s.flags.contains(ServoFlags::SAFE)
+            && s.flags.contains(ServoFlags::FORCE_VALID),
     }
 }
 
@@ -405,7 +405,7 @@ impl MonitorTick {
             tangent_true: p.tangent_angle_rad,
             u: p.surface_u_m,
             moving: ServoMode::try_from(s.mode) == Ok(ServoMode::Track)
-                && s.flags & SERVO_SAFE == 0,
+                && !s.flags.contains(ServoFlags::SAFE),
             tangent_estimated: s.tangent_angle_rad,
             friction: -s.tangential_force_n * dir,
             normal: s.normal_force_n,
@@ -708,10 +708,10 @@ impl ScenarioMonitor {
             safe_entries: s.safe_entries as usize,
             ..self.counters
         };
-        if s.flags & SERVO_SAFE != 0 {
+        if s.flags.contains(ServoFlags::SAFE) {
             self.safe_ticks += 1;
         }
-        if s.flags & msg::SERVO_FORCE_VALID == 0 {
+        if !s.flags.contains(ServoFlags::FORCE_VALID) {
             self.note_invalid(s.seq);
         }
         if self.kind == ScenarioKind::FrictionSuppression {
@@ -857,7 +857,7 @@ pub fn run_lockstep_replay(
         let p = plant_sample(sim.truth(), seq, 0);
         let mut s = servo_sample(sim.servo(), seq, 0, sim.time());
         if valid {
-            s.flags |= msg::SERVO_FORCE_VALID;
+            s.flags |= ServoFlags::FORCE_VALID;
         }
         monitor.push(&p, &s);
     }
@@ -1089,7 +1089,7 @@ mod tests {
             }
             sim.step();
             let mut ss = servo_sample(sim.servo(), seq, 0, sim.time());
-            ss.flags |= msg::SERVO_FORCE_VALID;
+            ss.flags |= ServoFlags::FORCE_VALID;
             id.push(&ident_tick(&ss));
         }
         let r = id.report();

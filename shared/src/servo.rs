@@ -187,84 +187,40 @@ impl Default for TrackingParams {
     }
 }
 
-/// What the fast loop is doing.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ServoMode {
-    /// Hybrid control along the estimated tangent.
-    #[default]
-    Track,
-    /// Decelerating to a stop before probing.
-    Stopping,
-    /// Running tangent-probe strokes.
-    Probing,
-    /// Strokes done; holding the preload until the estimate arrives.
-    AwaitingEstimate,
-    /// Estimate applied; holding until the normal force is back at the preload, then moving on.
-    Resuming,
-}
-
-/// The wire code of a mode: 0 track, 1 stopping, 2 probing, 3 awaiting estimate, 4 resuming.
-impl From<ServoMode> for u32 {
-    fn from(m: ServoMode) -> u32 {
-        match m {
-            ServoMode::Track => 0,
-            ServoMode::Stopping => 1,
-            ServoMode::Probing => 2,
-            ServoMode::AwaitingEstimate => 3,
-            ServoMode::Resuming => 4,
-        }
+wire_code! {
+    /// What the fast loop is doing (its wire code: 0 track, 1 stopping, 2 probing, 3 awaiting
+    /// estimate, 4 resuming).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+    #[serde(rename_all = "snake_case")]
+    pub enum ServoMode {
+        /// Hybrid control along the estimated tangent.
+        #[default]
+        Track = 0,
+        /// Decelerating to a stop before probing.
+        Stopping = 1,
+        /// Running tangent-probe strokes.
+        Probing = 2,
+        /// Strokes done; holding the preload until the estimate arrives.
+        AwaitingEstimate = 3,
+        /// Estimate applied; holding until the normal force is back at the preload, then
+        /// moving on.
+        Resuming = 4,
     }
 }
 
-/// The mode of a wire code; an unknown code is refused (and given back).
-impl TryFrom<u32> for ServoMode {
-    type Error = u32;
-    fn try_from(c: u32) -> Result<Self, u32> {
-        Ok(match c {
-            0 => ServoMode::Track,
-            1 => ServoMode::Stopping,
-            2 => ServoMode::Probing,
-            3 => ServoMode::AwaitingEstimate,
-            4 => ServoMode::Resuming,
-            _ => return Err(c),
-        })
-    }
-}
-
-/// Why an estimation started.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Trigger {
-    /// Asked for by the caller.
-    Request,
-    /// The normal force left its band.
-    Force,
-    /// The normal set-point drifted against the travel.
-    Slope,
-    /// Periodic, by travel.
-    Travel,
-}
-
-impl Trigger {
-    /// Its code in [`ServoState::last_trigger`] (1–4; 0 is none).
-    fn code(self) -> u32 {
-        match self {
-            Trigger::Request => 1,
-            Trigger::Force => 2,
-            Trigger::Slope => 3,
-            Trigger::Travel => 4,
-        }
-    }
-
-    fn from_code(c: u32) -> Option<Self> {
-        Some(match c {
-            1 => Trigger::Request,
-            2 => Trigger::Force,
-            3 => Trigger::Slope,
-            4 => Trigger::Travel,
-            _ => return None,
-        })
+wire_code! {
+    /// Why an estimation started (its code in [`ServoState::last_trigger`]; 0 is none).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+    #[serde(rename_all = "snake_case")]
+    pub enum Trigger {
+        /// Asked for by the caller.
+        Request = 1,
+        /// The normal force left its band.
+        Force = 2,
+        /// The normal set-point drifted against the travel.
+        Slope = 3,
+        /// Periodic, by travel.
+        Travel = 4,
     }
 }
 
@@ -488,18 +444,23 @@ pub struct ServoCore {
     last_stroke: SetpointOffset,
 }
 
-/// [`ServoState::flags`]: on-line tuning on.
-pub const STATE_TUNING: u32 = 1;
-/// [`ServoState::flags`]: the normal force loop on.
-pub const STATE_FORCE_CONTROL: u32 = 2;
-/// [`ServoState::flags`]: the force trigger armed.
-pub const STATE_FORCE_ARMED: u32 = 4;
-/// [`ServoState::flags`]: in the safe state (the `safe_*` fields hold it).
-pub const STATE_SAFE: u32 = 8;
-/// [`ServoState::flags`]: an Aω to restore when `Resuming` ends.
-pub const STATE_RESUME_A_OMEGA: u32 = 16;
-/// [`ServoState::flags`]: an accepted estimate so far (`last_estimate`).
-pub const STATE_LAST_ESTIMATE: u32 = 32;
+wire_flags! {
+    /// [`ServoState::flags`].
+    pub struct ServoStateFlags {
+        /// On-line tuning on.
+        const TUNING = 1;
+        /// The normal force loop on.
+        const FORCE_CONTROL = 2;
+        /// The force trigger armed.
+        const FORCE_ARMED = 4;
+        /// In the safe state (the `safe` field holds it).
+        const SAFE = 8;
+        /// An Aω to restore when `Resuming` ends.
+        const RESUME_A_OMEGA = 16;
+        /// An accepted estimate so far (`last_estimate`).
+        const LAST_ESTIMATE = 32;
+    }
+}
 
 /// Everything the fast loop carries from one tick to the next, for a snapshot: a servo built
 /// with the same settings and start ([`ServoCore::new`]) and given this state
@@ -515,8 +476,8 @@ pub const STATE_LAST_ESTIMATE: u32 = 32;
 pub struct ServoState {
     /// [`ServoMode`] as its wire code.
     pub mode: u32,
-    /// `STATE_*` flags.
-    pub flags: u32,
+    /// [`ServoStateFlags`].
+    pub flags: ServoStateFlags,
     /// What started the last estimation: 0 none, 1 request, 2 force, 3 slope, 4 travel.
     pub last_trigger: u32,
     /// Reserved (0).
@@ -614,7 +575,9 @@ impl ServoState {
         all(&self.last_stroke_m);
         if !finite {
             Err(SnapshotError::NotFinite)
-        } else if ServoMode::try_from(self.mode).is_err() || self.last_trigger > 4 {
+        } else if ServoMode::try_from(self.mode).is_err()
+            || (self.last_trigger != 0 && Trigger::try_from(self.last_trigger).is_err())
+        {
             Err(SnapshotError::UnknownCode)
         } else {
             Ok(())
@@ -841,7 +804,9 @@ impl ServoCore {
     pub fn state(&self) -> ServoState {
         let c = &self.counters;
         let n = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
-        let flag = |on: bool, f: u32| if on { f } else { 0 };
+        let flag = |on: bool, f: ServoStateFlags| {
+            if on { f } else { ServoStateFlags::empty() }
+        };
         let safe = self.safe.map_or([0.0; 4], |s| {
             [
                 s.resume_velocity,
@@ -853,13 +818,16 @@ impl ServoCore {
         let (angle, at) = self.last_estimate.unwrap_or((0.0, 0.0));
         ServoState {
             mode: self.mode.into(),
-            flags: flag(self.tuning, STATE_TUNING)
-                | flag(self.force_control, STATE_FORCE_CONTROL)
-                | flag(self.force_armed, STATE_FORCE_ARMED)
-                | flag(self.safe.is_some(), STATE_SAFE)
-                | flag(self.resume_a_omega.is_some(), STATE_RESUME_A_OMEGA)
-                | flag(self.last_estimate.is_some(), STATE_LAST_ESTIMATE),
-            last_trigger: self.last_trigger.map_or(0, Trigger::code),
+            flags: flag(self.tuning, ServoStateFlags::TUNING)
+                | flag(self.force_control, ServoStateFlags::FORCE_CONTROL)
+                | flag(self.force_armed, ServoStateFlags::FORCE_ARMED)
+                | flag(self.safe.is_some(), ServoStateFlags::SAFE)
+                | flag(
+                    self.resume_a_omega.is_some(),
+                    ServoStateFlags::RESUME_A_OMEGA,
+                )
+                | flag(self.last_estimate.is_some(), ServoStateFlags::LAST_ESTIMATE),
+            last_trigger: self.last_trigger.map_or(0, u32::from),
             reserved: 0,
             counters: [
                 n(c.started),
@@ -905,7 +873,7 @@ impl ServoCore {
     pub fn restore(&mut self, st: &ServoState) -> Result<(), SnapshotError> {
         st.check()?;
         let mode = ServoMode::try_from(st.mode).unwrap_or_default();
-        let has = |f: u32| st.flags & f != 0;
+        let has = |f: ServoStateFlags| st.flags.contains(f);
         let c = st.counters.map(|v| v as usize);
         self.counters = EstimationCounters {
             started: c[0],
@@ -922,10 +890,10 @@ impl ServoCore {
         self.hybrid.restore(&st.hybrid);
         self.dither.restore(&st.dither);
         self.tuner.restore(&st.tuner);
-        self.tuning = has(STATE_TUNING);
-        self.force_control = has(STATE_FORCE_CONTROL);
-        self.force_armed = has(STATE_FORCE_ARMED);
-        self.last_trigger = Trigger::from_code(st.last_trigger);
+        self.tuning = has(ServoStateFlags::TUNING);
+        self.force_control = has(ServoStateFlags::FORCE_CONTROL);
+        self.force_armed = has(ServoStateFlags::FORCE_ARMED);
+        self.last_trigger = Trigger::try_from(st.last_trigger).ok();
         self.tare = Wrench {
             force: Vec2::new(st.tare[0], st.tare[1]),
             torque: st.tare[2],
@@ -934,20 +902,21 @@ impl ServoCore {
         self.resume_velocity = st.resume_velocity_m_per_s;
         self.normal_filtered = st.normal_filtered_n;
         [self.odometer, self.odometer_total] = st.odometer_m;
-        self.last_estimate =
-            has(STATE_LAST_ESTIMATE).then_some((st.last_estimate[0], st.last_estimate[1]));
+        self.last_estimate = has(ServoStateFlags::LAST_ESTIMATE)
+            .then_some((st.last_estimate[0], st.last_estimate[1]));
         self.curvature = st.curvature_per_m;
         self.curve_base = st.curve_base_rad;
         self.drift = st.drift_rad;
         [self.stopped_s, self.settled_s] = st.stopped_settled_s;
         self.normal_window.refill(&st.normal_window);
-        self.safe = has(STATE_SAFE).then_some(SafeState {
+        self.safe = has(ServoStateFlags::SAFE).then_some(SafeState {
             resume_velocity: st.safe[0],
             resume_a_omega: st.safe[1],
             backoff_left: st.safe[2],
             good_for_s: st.safe[3],
         });
-        self.resume_a_omega = has(STATE_RESUME_A_OMEGA).then_some(st.resume_a_omega_m_per_s);
+        self.resume_a_omega =
+            has(ServoStateFlags::RESUME_A_OMEGA).then_some(st.resume_a_omega_m_per_s);
         self.last_stroke = SetpointOffset::default();
         self.probe.reset();
         self.reprobe = false;

@@ -11,29 +11,30 @@
 
 use crate::msg::{VERSION, WrenchSample};
 
-/// Why a sample or a tick was refused. The numbers are the `safe_reason` codes of
-/// [`crate::msg::ServoSample`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u32)]
-pub enum Verdict {
-    /// Accepted / fresh.
-    Ok = 0,
-    /// A NaN or infinite value.
-    NonFinite = 1,
-    /// Beyond the sensor's rated range.
-    OutOfRange = 2,
-    /// The same sequence number again.
-    SeqRepeat = 3,
-    /// A sequence number (or sensor epoch) older than the newest accepted.
-    SeqBackwards = 4,
-    /// A timestamp later than now.
-    Future = 5,
-    /// Wrong message version.
-    Version = 6,
-    /// The newest accepted sample is older than the age limit.
-    Stale = 7,
-    /// No sample accepted yet.
-    NoData = 8,
+wire_code! {
+    /// Why a sample or a tick was refused. The numbers are the `safe_reason` codes of
+    /// [`crate::msg::ServoSample`].
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    pub enum Verdict {
+        /// Accepted / fresh.
+        Ok = 0,
+        /// A NaN or infinite value.
+        NonFinite = 1,
+        /// Beyond the sensor's rated range.
+        OutOfRange = 2,
+        /// The same sequence number again.
+        SeqRepeat = 3,
+        /// A sequence number (or sensor epoch) older than the newest accepted.
+        SeqBackwards = 4,
+        /// A timestamp later than now.
+        Future = 5,
+        /// Wrong message version.
+        Version = 6,
+        /// The newest accepted sample is older than the age limit.
+        Stale = 7,
+        /// No sample accepted yet.
+        NoData = 8,
+    }
 }
 
 /// Limits of the gate.

@@ -1,0 +1,90 @@
+//! The messages the afs processes exchange over iceoryx2 shared memory.
+//!
+//! Every type is `#[repr(C)]`, fixed-size (or a slice of a fixed-size element), free of
+//! pointers, and derives `ZeroCopySend` with a stable `#[type_name]` so that a client in another
+//! language (iceoryx2's C, C++ or Python bindings) can subscribe with a struct of the same
+//! layout and name. Each starts with a `version` ([`VERSION`]); each carries a sequence number
+//! and the timestamps of its life on one clock: `CLOCK_MONOTONIC` in nanoseconds, the same for
+//! every process on the machine. Byte layouts and service names: `docs/messages.md` (checked by
+//! the tests below).
+//!
+//! Conversions to and from the core's types ([`TangentOutcome`], [`TangentParams`],
+//! [`ProbePlan`]) live here so that both ends of a service use the same code.
+
+mod estimation;
+mod layout;
+mod samples;
+mod status;
+mod world;
+
+pub use estimation::*;
+pub use layout::*;
+pub use samples::*;
+pub use status::*;
+pub use world::*;
+
+/// Layout version of every message; a reader refuses other versions.
+pub const VERSION: u32 = 1;
+
+/// Service names. Stacks are isolated by the iceoryx2 file prefix (`afs_<prefix>_`), not by the
+/// names, so a client opens these names with the stack's config.
+pub mod service {
+    /// [`PlantSample`](super::PlantSample), every servo tick (servo → sensor, recorder).
+    pub const PLANT: &str = "afs/plant/state";
+    /// [`WrenchSample`](super::WrenchSample), every sensor sample (sensor → servo).
+    pub const WRENCH: &str = "afs/sensor/wrench";
+    /// [`ServoSample`](super::ServoSample), every servo tick.
+    pub const SERVO: &str = "afs/servo/state";
+    /// [`LoopStats`](super::LoopStats), 10 Hz.
+    pub const LOOP_STATS: &str = "afs/servo/loop_stats";
+    /// Request-response: [`TangentRequestHeader`](super::TangentRequestHeader) +
+    /// `[ProbeSample]` → [`TangentResponse`](super::TangentResponse).
+    pub const TANGENT: &str = "afs/estimator/tangent";
+    /// Request-response: [`RotationRequestHeader`](super::RotationRequestHeader) +
+    /// `[RotationSample]` → [`RotationResponse`](super::RotationResponse).
+    pub const ROTATION: &str = "afs/estimator/rotation";
+    /// [`FrictionReport`](super::FrictionReport), about 1 Hz.
+    pub const FRICTION: &str = "afs/estimator/friction";
+    /// [`SupervisorStatus`](super::SupervisorStatus), 2 Hz.
+    pub const SUPERVISOR: &str = "afs/supervisor/status";
+    /// [`BoardStartup`](super::BoardStartup), once per board process (boards → supervisor).
+    pub const STARTUP: &str = "afs/boards/startup";
+    /// [`ServoCommand`], on demand (supervisor, clients → servo).
+    pub const COMMAND: &str = "afs/servo/command";
+    /// Blackboard of the world's state (key 0: [`WorldSnapshot`](super::WorldSnapshot)),
+    /// owned by the supervisor, written by the servo.
+    pub const WORLD: &str = "afs/plant/world";
+}
+
+/// Copies `s` into a NUL-padded fixed buffer (truncating at a character boundary).
+pub fn fixed_str<const N: usize>(s: &str) -> [u8; N] {
+    let mut out = [0u8; N];
+    let mut end = s.len().min(N);
+    while !s.is_char_boundary(end) {
+        end -= 1;
+    }
+    out[..end].copy_from_slice(&s.as_bytes()[..end]);
+    out
+}
+
+/// The text of a NUL-padded fixed buffer.
+pub fn str_of(b: &[u8]) -> String {
+    let end = b.iter().position(|&c| c == 0).unwrap_or(b.len());
+    String::from_utf8_lossy(&b[..end]).into_owned()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Fixed strings truncate on a character boundary and read back.
+    #[test]
+    fn fixed_strings() {
+        let b: [u8; 6] = fixed_str("servo");
+        assert_eq!(str_of(&b), "servo");
+        let b: [u8; 4] = fixed_str("añbc");
+        assert_eq!(str_of(&b), "añb");
+        let b: [u8; 2] = fixed_str("ñx");
+        assert_eq!(str_of(&b), "ñ");
+    }
+}
