@@ -9,13 +9,13 @@
 use crate::board::Startup;
 use crate::ipc;
 use crate::rt;
+use afs_shared::ident::IdentTick;
 use afs_shared::ident::OnlineFrictionId;
 use afs_shared::math::Vec2;
 use afs_shared::msg::{
     self, FrictionReport, FrictionStatus, Outcome, RotationResponse, TangentResponse,
 };
 use afs_shared::multicontact::estimate_rotation_centre;
-use afs_shared::scenario::ident_tick;
 use afs_shared::tangent;
 use anyhow::Result;
 use iceoryx2::port::update_connections::UpdateConnections;
@@ -85,7 +85,7 @@ pub fn run(prefix: &str, mut startup: Startup, stop: &AtomicBool) -> Result<Esti
         startup.update_connections();
         while let Ok(Some(s)) = servo_sub.receive() {
             if s.payload().version == msg::VERSION {
-                ident.push(&ident_tick(s.payload()));
+                ident.push(&IdentTick::from(s.payload()));
             }
         }
         while let Ok(Some(req)) = tangent_server.receive() {

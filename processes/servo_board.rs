@@ -12,7 +12,7 @@ use crate::board::Startup;
 use crate::ipc::{self, Svc};
 use crate::{hist, rt};
 use afs_shared::msg::{
-    self, Board, Command, LoopFlags, LoopStats, PlantSample, Quantiles, ServoFlags,
+    self, Board, Command, LoopFlags, LoopStats, PlantSample, Quantiles, ServoFlags, ServoSample,
     TangentRequestHeader, TangentResponse, WorldSnapshot,
 };
 use afs_shared::plant::{Plant, PlantState};
@@ -381,7 +381,7 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
     let p0 = match snapshot {
         Some(s) if s.plant.version == msg::VERSION && s.plant.seq == s.seq => s.plant,
         _ => {
-            let mut p = scenario::plant_sample(plant.truth(), seq, t_wait);
+            let mut p = PlantSample::of_tick(plant.truth(), seq, t_wait);
             p.publish_ns = rt::monotonic_ns();
             p
         }
@@ -569,8 +569,8 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
         }
 
         // Publish the tick.
-        let mut p = scenario::plant_sample(plant.truth(), seq, now);
-        let mut s = scenario::servo_sample(&servo, seq, now, plant.time());
+        let mut p = PlantSample::of_tick(plant.truth(), seq, now);
+        let mut s = ServoSample::of_tick(&servo, seq, now, plant.time());
         s.safe_reason = safe_reason;
         if let Some((w, age)) = used {
             s.flags |= ServoFlags::FORCE_VALID;

@@ -13,6 +13,7 @@
 //! link 2 and tip about joint 2).
 
 use crate::error::ConfigError;
+pub use crate::error::IkError;
 use crate::math::Vec2;
 use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
@@ -103,30 +104,6 @@ pub enum Elbow {
     Positive,
     /// q2 < 0.
     Negative,
-}
-
-/// Why inverse kinematics has no answer.
-#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
-pub enum IkError {
-    /// The point is outside the annulus the arm can reach.
-    #[error(
-        "point ({x:.4}, {y:.4}) m is out of reach (distance {r:.4} m not in [{min:.4}, {max:.4}])"
-    )]
-    OutOfReach {
-        /// X (m).
-        x: f64,
-        /// Y (m).
-        y: f64,
-        /// Distance from the base (m).
-        r: f64,
-        /// Inner reach (m).
-        min: f64,
-        /// Outer reach (m).
-        max: f64,
-    },
-    /// A coordinate is not finite.
-    #[error("inverse kinematics was given a non-finite point")]
-    NotFinite,
 }
 
 /// The arm model with derived dynamic constants.

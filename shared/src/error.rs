@@ -1,9 +1,8 @@
-//! The core's set-up errors: a setting that cannot be used, a scenario or fault kind that does
-//! not exist. Each message names the setting and says what it must be.
+//! The core's errors: a setting that cannot be used (and the surface and inverse-kinematics
+//! errors it wraps), a scenario or fault kind that does not exist, a controller snapshot that
+//! must not be restored, an experiment without a result. Each message says what to change.
 
-use crate::arm::IkError;
 use crate::friction::FrictionError;
-use crate::surface::SurfaceError;
 
 /// A set-up that cannot be used.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -123,4 +122,50 @@ impl ExperimentError {
             reason: reason.to_string(),
         }
     }
+}
+
+/// Why inverse kinematics has no answer.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum IkError {
+    /// The point is outside the annulus the arm can reach.
+    #[error(
+        "point ({x:.4}, {y:.4}) m is out of reach (distance {r:.4} m not in [{min:.4}, {max:.4}])"
+    )]
+    OutOfReach {
+        /// X (m).
+        x: f64,
+        /// Y (m).
+        y: f64,
+        /// Distance from the base (m).
+        r: f64,
+        /// Inner reach (m).
+        min: f64,
+        /// Outer reach (m).
+        max: f64,
+    },
+    /// A coordinate is not finite.
+    #[error("inverse kinematics was given a non-finite point")]
+    NotFinite,
+}
+
+/// Why a surface description is rejected.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SurfaceError {
+    /// A number is NaN or infinite.
+    #[error("surface parameter '{0}' is not a finite number")]
+    NotFinite(&'static str),
+    /// Sinusoid wavelength must be positive.
+    #[error("sinusoid wavelength_m = {0} must be > 0")]
+    BadWavelength(f64),
+    /// Polyline needs at least two vertices with strictly increasing u.
+    #[error("polyline needs ≥ 2 vertices with strictly increasing u (vertex {0} breaks this)")]
+    BadPolyline(usize),
+    /// Too many vertices for the allocation-free contact query.
+    #[error("polyline has {count} vertices; at most {max} are supported")]
+    TooManyVertices {
+        /// Vertices given.
+        count: usize,
+        /// Most supported.
+        max: usize,
+    },
 }

@@ -14,6 +14,7 @@
 //! sensor's stiffness (thesis §4.5.1), plus a small normal damping; the force never pulls.
 
 use crate::error::ConfigError;
+pub use crate::error::SurfaceError;
 use crate::math::{Vec2, perp, series_stiffness, unit};
 use serde::{Deserialize, Serialize};
 
@@ -57,23 +58,6 @@ pub struct Surface {
     pub frame: SurfaceFrame,
     /// Shape.
     pub shape: Shape,
-}
-
-/// Why a surface description is rejected.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum SurfaceError {
-    /// A number is NaN or infinite.
-    #[error("surface parameter '{0}' is not a finite number")]
-    NotFinite(&'static str),
-    /// Sinusoid wavelength must be positive.
-    #[error("sinusoid wavelength_m = {0} must be > 0")]
-    BadWavelength(f64),
-    /// Polyline needs at least two vertices with strictly increasing u.
-    #[error("polyline needs ≥ 2 vertices with strictly increasing u (vertex {0} breaks this)")]
-    BadPolyline(usize),
-    /// Too many vertices for the allocation-free contact query.
-    #[error("polyline has {0} vertices; at most {max} are supported", max = MAX_VERTICES)]
-    TooManyVertices(usize),
 }
 
 /// Largest polyline the contact query handles.
@@ -165,7 +149,10 @@ impl Surface {
             }
             Shape::Polyline { vertices } => {
                 if vertices.len() > MAX_VERTICES {
-                    return Err(SurfaceError::TooManyVertices(vertices.len()));
+                    return Err(SurfaceError::TooManyVertices {
+                        count: vertices.len(),
+                        max: MAX_VERTICES,
+                    });
                 }
                 if vertices.len() < 2 {
                     return Err(SurfaceError::BadPolyline(vertices.len()));

@@ -7,6 +7,7 @@ use crate::ident::{
     CoefficientFit, FrictionFit, THESIS_FIG_4_6, fit_friction_coefficient, fit_friction_law,
 };
 use crate::sim::{Lockstep, SimConfig};
+use crate::ticks::{Tick, WindowSummary, decimate, run_recording, sliding_periods, window};
 use crate::tuner::{CostTunerParams, ThesisTunerParams, TunerConfig, TunerReport};
 use serde::Serialize;
 

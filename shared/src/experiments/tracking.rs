@@ -3,6 +3,7 @@
 use super::*;
 use crate::error::ExperimentError;
 use crate::friction::FrictionLaw;
+use crate::setups::on_corner_profile;
 use crate::sim::{EstimateLog, Lockstep, SimConfig};
 use crate::tangent::TangentOutcome;
 use crate::tuner::TunerConfig;
@@ -313,7 +314,7 @@ pub fn tangent(opts: &Options) -> Result<Outcome<TangentSummary>, ExperimentErro
     })
 }
 
-pub use crate::scenario::{TrackSample, TrackingRun};
+pub use crate::monitor::{TrackSample, TrackingRun};
 
 /// Tracks the surface of `cfg` from its start along +u at `velocity` until the contact reaches
 /// `u_end` (or `time_limit`), with tangent estimation triggered by the force limits and the
@@ -325,7 +326,8 @@ pub(crate) fn run_tracking(
     a_omega: f64,
     time_limit: f64,
 ) -> Result<TrackingRun, ExperimentError> {
-    use crate::scenario::{MonitorTick, TrackingMonitor, plant_sample, servo_sample};
+    use crate::monitor::{MonitorTick, TrackingMonitor};
+    use crate::msg::{PlantSample, ServoSample};
     let mut cfg = cfg.clone();
     cfg.servo.tracking.enabled = true;
     let mut sim = Lockstep::new(&cfg)?;
@@ -338,8 +340,8 @@ pub(crate) fn run_tracking(
     let limit = (time_limit / sim.dt()) as u64;
     for seq in 0..limit {
         sim.step();
-        let p = plant_sample(sim.truth(), seq, 0);
-        let s = servo_sample(sim.servo(), seq, 0, sim.time());
+        let p = PlantSample::of_tick(sim.truth(), seq, 0);
+        let s = ServoSample::of_tick(sim.servo(), seq, 0, sim.time());
         monitor.push(&MonitorTick::from_samples(&p, &s));
         if sim.truth().surface_u_m >= u_end {
             break;
@@ -531,36 +533,6 @@ pub struct CornersSummary {
     pub worst_force_deviation: f64,
     /// The run.
     pub run: TrackingRun,
-}
-
-/// The corner profile: faces of 20 mm at 0°, +10°, −5°, +15°, +5° (turns +10°, −15°, +20°,
-/// −10°), centred on the arm's operating point.
-pub(crate) fn corner_profile() -> Vec<[f64; 2]> {
-    let slopes_deg = [0.0f64, 10.0, -5.0, 15.0, 5.0];
-    let mut v = vec![[-0.05, 0.0]];
-    for s in slopes_deg {
-        let [u, h] = *v.last().unwrap_or(&[0.0, 0.0]);
-        v.push([u + 0.02, h + 0.02 * s.to_radians().tan()]);
-    }
-    v
-}
-
-/// Puts `cfg` on the level corner profile at its surface origin, starting 2 mm past the first
-/// vertex; returns the vertices and where runs end (2 mm before the last vertex).
-pub(crate) fn on_corner_profile(cfg: &mut SimConfig) -> (Vec<[f64; 2]>, f64) {
-    let vertices = corner_profile();
-    cfg.surface = crate::surface::Surface {
-        frame: crate::surface::SurfaceFrame {
-            origin_m: cfg.surface.frame.origin_m,
-            angle_rad: 0.0,
-        },
-        shape: crate::surface::Shape::Polyline {
-            vertices: vertices.clone(),
-        },
-    };
-    cfg.start_u_m = vertices[0][0] + 0.002;
-    let end = vertices[vertices.len() - 1][0] - 0.002;
-    (vertices, end)
 }
 
 /// Tracks the piecewise-linear profile through its four corners at 5 mm/s with the
@@ -857,4 +829,33 @@ pub fn fig5_3(opts: &Options) -> Result<Outcome<Fig53Summary>, ExperimentError> 
         checks,
         figure,
     })
+}
+
+#[cfg(test)]
+mod scenario_tests {
+    use super::*;
+
+    /// The surface-tracking scenario run through the lockstep gives the same figures, bit for
+    /// bit, as the `fig5.6` experiment's code over the same 3 s (one monitor measures both).
+    #[test]
+    fn lockstep_reference_matches_the_experiment_code() {
+        let base = SimConfig::default();
+        let s = crate::scenario::Scenario::new("surface-tracking", &base).unwrap();
+        let r = crate::scenario::run_lockstep(&s, 3.0).unwrap();
+        assert_eq!(r.ticks, 30_000);
+        let e = run_tracking(
+            &s.cfg,
+            crate::scenario::TRACKING_VELOCITY,
+            s.end_u_m.unwrap(),
+            5.0 * crate::scenario::TRACKING_VELOCITY,
+            3.0,
+        )
+        .unwrap();
+        assert_eq!(r.tracking.tangent_error_rms_deg, e.tangent_error_rms_deg);
+        assert_eq!(r.tracking.worst_normal_deviation, e.worst_normal_deviation);
+        assert_eq!(r.tracking.travelled_m, e.travelled_m);
+        assert_eq!(r.tracking.ticks_without_contact, 0);
+        let c = crate::scenario::compare(&r, &r);
+        assert!(c.agrees);
+    }
 }

@@ -1,7 +1,10 @@
 //! The per-tick samples (world, force, controller) and the servo's commands.
 
+use super::VERSION;
+use crate::ident::IdentTick;
+use crate::plant::PlantTruth;
 use crate::sensor::Wrench;
-use crate::servo::{EstimationCounters, ServoDiag, ServoMode};
+use crate::servo::{EstimationCounters, ServoCore, ServoDiag, ServoMode};
 use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
@@ -54,6 +57,32 @@ pub struct PlantSample {
 }
 
 impl PlantSample {
+    /// The world sample of a tick.
+    pub fn of_tick(tr: &PlantTruth, seq: u64, tick_ns: u64) -> Self {
+        PlantSample {
+            version: VERSION,
+            contact_count: u32::try_from(tr.contact_count).unwrap_or(u32::MAX),
+            seq,
+            tick_ns,
+            publish_ns: 0,
+            time_s: tr.time_s,
+            q_rad: [tr.q[0], tr.q[1]],
+            qd_rad_per_s: [tr.qd[0], tr.qd[1]],
+            tip_m: [tr.tip.x, tr.tip.y],
+            tip_velocity_m_per_s: [tr.tip_velocity.x, tr.tip_velocity.y],
+            contact_force_n: [tr.contact_force.x, tr.contact_force.y],
+            sensor_force_n: [tr.sensor_wrench.force.x, tr.sensor_wrench.force.y],
+            sensor_torque_nm: tr.sensor_wrench.torque,
+            normal_force_n: tr.normal_force_n,
+            friction_force_n: tr.friction_force_n,
+            sliding_velocity_m_per_s: tr.sliding_velocity_m_per_s,
+            depth_m: tr.depth_m,
+            surface_u_m: tr.surface_u_m,
+            tangent_angle_rad: tr.tangent_angle_rad,
+            torque_nm: [tr.torque[0], tr.torque[1]],
+        }
+    }
+
     /// The wrench the sensor feels.
     pub fn sensor_wrench(&self) -> Wrench {
         Wrench {
@@ -208,6 +237,20 @@ pub struct ServoSample {
 }
 
 impl ServoSample {
+    /// The controller sample of a tick (the wrench fields are the caller's).
+    pub fn of_tick(servo: &ServoCore, seq: u64, tick_ns: u64, time_s: f64) -> Self {
+        let mut s = ServoSample {
+            version: VERSION,
+            seq,
+            tick_ns,
+            time_s,
+            wrench_seq: u64::MAX,
+            ..Default::default()
+        };
+        s.set_diag(servo.diag(), &servo.counters());
+        s
+    }
+
     /// Fills the controller fields from the core's diagnostics and counters.
     pub fn set_diag(&mut self, d: &ServoDiag, c: &EstimationCounters) {
         self.velocity_target_m_per_s = d.velocity_target_m_per_s;
@@ -237,6 +280,25 @@ impl ServoSample {
         self.aborted = n(c.aborted);
         self.safe_entries = n(c.safe_entries);
         self.estimations_requested = n(c.requested);
+    }
+}
+
+/// The identification's view of a servo sample.
+impl From<&ServoSample> for IdentTick {
+    fn from(s: &ServoSample) -> Self {
+        IdentTick {
+            t: s.time_s,
+            velocity_target: s.velocity_target_m_per_s,
+            nominal_velocity: s.nominal_velocity_m_per_s,
+            a_omega: s.a_omega_m_per_s,
+            tangential_force: s.tangential_force_n,
+            friction_normalized: s.friction_normalized_n,
+            normal_force: s.normal_force_n,
+            tangent_velocity: s.tangent_velocity_m_per_s,
+            tracking: ServoMode::try_from(s.mode) == Ok(ServoMode::Track)
+                && !s.flags.contains(ServoFlags::SAFE)
+                && s.flags.contains(ServoFlags::FORCE_VALID),
+        }
     }
 }
 

@@ -1,0 +1,221 @@
+//! The lockstep reference of a scenario, replaying a real-time run's events, and the
+//! comparison of the two.
+
+use super::{DriverState, Scenario, ScenarioReport, TickRange};
+use crate::error::ScenarioError;
+use crate::msg::{PlantSample, ServoFlags, ServoSample};
+use crate::sim::Lockstep;
+use serde::Serialize;
+
+/// Runs `scenario` for `duration_s` (or to its end) in the lockstep simulation: the reference
+/// the real-time stack is compared with. Tick `seq` (from 1, as the servo numbers them) steps
+/// the world from simulated time (seq − 1)·dt.
+pub fn run_lockstep(scenario: &Scenario, duration_s: f64) -> Result<ScenarioReport, ScenarioError> {
+    run_lockstep_replay(scenario, duration_s, &Replay::default())
+}
+
+/// Events of a real-time run that the lockstep reference goes through at the same ticks
+/// ([`ScenarioMonitor::replay`]).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Replay<'a> {
+    /// Ticks whose force data the servo could not use, in order.
+    pub force_invalid: &'a [TickRange],
+    /// Ticks at which the servo started an estimation it was asked for, in order.
+    pub requested: &'a [u64],
+    /// Ticks run first by a restarted servo, in order.
+    pub servo_restarts: &'a [u64],
+}
+
+/// [`run_lockstep`], going through the real-time run's events at the same ticks (`replay`,
+/// from [`ScenarioMonitor::replay`]): the servo's force input is made invalid on the ticks the
+/// stack could not use its force data, so the reference goes through the same safe-state
+/// episodes (a scheduling hiccup of the machine aborts a probe run and shifts every later
+/// event: part of both runs rather than a disagreement), the servo is asked for a tangent
+/// estimate on the ticks the stack's servo started one on request, and it is restarted from
+/// its own state ([`Lockstep::restart_servo`]) before the ticks a restarted servo ran first.
+pub fn run_lockstep_replay(
+    scenario: &Scenario,
+    duration_s: f64,
+    replay: &Replay<'_>,
+) -> Result<ScenarioReport, ScenarioError> {
+    let invalid = replay.force_invalid;
+    let mut sim = Lockstep::new(&scenario.cfg)?;
+    let mut driver = scenario.driver();
+    let mut monitor = scenario.monitor();
+    let dt = sim.dt();
+    let limit = (duration_s.min(scenario.natural_duration_s) / dt).round() as u64;
+    let mut next = 0;
+    for seq in 1..=limit {
+        let t = (seq - 1) as f64 * dt;
+        let u = sim.truth().surface_u_m;
+        if replay.servo_restarts.binary_search(&seq).is_ok() {
+            sim.restart_servo()
+                .map_err(|reason| ScenarioError::Restart { tick: seq, reason })?;
+        }
+        if driver.step(t, u, sim.servo_mut()) == DriverState::Done {
+            break;
+        }
+        while next < invalid.len() && invalid[next].first + invalid[next].len <= seq {
+            next += 1;
+        }
+        let valid = !invalid.get(next).is_some_and(|r| r.contains(seq));
+        sim.set_force_valid(valid);
+        if replay.requested.binary_search(&seq).is_ok() {
+            sim.servo_mut().request_tangent_estimate();
+        }
+        sim.step();
+        let p = PlantSample::of_tick(sim.truth(), seq, 0);
+        let mut s = ServoSample::of_tick(sim.servo(), seq, 0, sim.time());
+        if valid {
+            s.flags |= ServoFlags::FORCE_VALID;
+        }
+        monitor.push(&p, &s);
+    }
+    let mut report = monitor.report();
+    report.tracking.estimates = sim.estimates().to_vec();
+    Ok(report)
+}
+
+/// One compared figure.
+#[derive(Debug, Clone, Serialize)]
+pub struct Compared {
+    /// Figure.
+    pub name: &'static str,
+    /// Real-time stack.
+    pub stack: f64,
+    /// Lockstep reference.
+    pub reference: f64,
+    /// Allowed |stack − reference|.
+    pub tolerance: f64,
+    /// Within tolerance.
+    pub agrees: bool,
+}
+
+/// How the real-time stack's figures compare with the lockstep reference's.
+#[derive(Debug, Clone, Serialize)]
+pub struct Agreement {
+    /// Every figure within its tolerance.
+    pub agrees: bool,
+    /// The figures.
+    pub figures: Vec<Compared>,
+}
+
+/// Compares a stack run with its lockstep reference. The tolerances (justified in
+/// `docs/stack.md`): the stack's sensor samples on its own clock, so its noise meets the plant
+/// at other instants and its force data is 0.1–0.3 ms older; the estimator answers a few
+/// milliseconds later; a scheduling hiccup longer than the force-age limit sends the servo to
+/// its safe state for some tens of milliseconds. These move the figures by amounts of the
+/// order of their seed-to-seed spread, which is what the tolerances allow. The worst
+/// period-mean force deviation is reported but not compared: one safe-state episode sets it.
+pub fn compare(stack: &ScenarioReport, reference: &ScenarioReport) -> Agreement {
+    let mut figures = Vec::new();
+    let mut add = |name: &'static str, a: f64, b: f64, tol: f64| {
+        let agrees = (a - b).abs() <= tol || (a.is_nan() && b.is_nan());
+        figures.push(Compared {
+            name,
+            stack: a,
+            reference: b,
+            tolerance: tol,
+            agrees,
+        });
+    };
+    let (s, r) = (&stack.tracking, &reference.tracking);
+    add(
+        "tangent error RMS (deg)",
+        s.tangent_error_rms_deg,
+        r.tangent_error_rms_deg,
+        0.25 + 0.25 * r.tangent_error_rms_deg,
+    );
+    add(
+        "RMS period-mean normal-force deviation (fraction)",
+        s.normal_deviation_rms,
+        r.normal_deviation_rms,
+        0.01 + 0.25 * r.normal_deviation_rms,
+    );
+    add(
+        "tangent estimates completed",
+        s.estimations.estimates as f64,
+        r.estimations.estimates as f64,
+        1.0,
+    );
+    if let (Some(sf), Some(rf)) = (&stack.friction, &reference.friction) {
+        add(
+            "mean friction before tuning (N)",
+            sf.start_mean_n,
+            rf.start_mean_n,
+            0.1 * rf.start_mean_n.abs(),
+        );
+        add(
+            "mean friction at the end / before tuning",
+            sf.end_ratio,
+            rf.end_ratio,
+            0.05,
+        );
+        add(
+            "settled Aω (m/s)",
+            sf.settled_a_omega_m_per_s,
+            rf.settled_a_omega_m_per_s,
+            0.15 * rf.settled_a_omega_m_per_s.abs(),
+        );
+    }
+    Agreement {
+        agrees: figures.iter().all(|f| f.agrees),
+        figures,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::SimConfig;
+
+    /// Replaying force-invalid ticks: the reference goes through the same safe-state episodes
+    /// at the same ticks and its monitor sees exactly the replayed ranges; with none it is the
+    /// plain reference, bit for bit.
+    #[test]
+    fn the_reference_replays_the_stacks_invalid_force_ticks() {
+        let base = SimConfig::default();
+        let s = Scenario::new("surface-tracking", &base).unwrap();
+        let plain = run_lockstep(&s, 1.0).unwrap();
+        let none = run_lockstep_replay(&s, 1.0, &Replay::default()).unwrap();
+        assert_eq!(
+            plain.tracking.tangent_error_rms_deg,
+            none.tracking.tangent_error_rms_deg
+        );
+        assert_eq!(none.safe_ticks, 0);
+        let gaps = [
+            TickRange {
+                first: 3000,
+                len: 25,
+            },
+            TickRange {
+                first: 6000,
+                len: 1,
+            },
+        ];
+        let replayed = run_lockstep_replay(
+            &s,
+            1.0,
+            &Replay {
+                force_invalid: &gaps,
+                ..Replay::default()
+            },
+        )
+        .unwrap();
+        // Each gap enters the safe state, which lasts until the data has been good for the
+        // recovery time (20 ms = 200 ticks) after the gap.
+        assert!(replayed.safe_ticks >= 2 * 200, "{}", replayed.safe_ticks);
+        assert!(
+            replayed.safe_ticks <= 25 + 1 + 2 * 201,
+            "{}",
+            replayed.safe_ticks
+        );
+        let mut m = s.monitor();
+        for r in gaps {
+            for seq in r.first..r.first + r.len {
+                m.note_invalid(seq);
+            }
+        }
+        assert_eq!(m.force_invalid(), gaps);
+    }
+}
