@@ -1,17 +1,20 @@
-//! Process-side glue for the afs binaries: real-time plumbing, iceoryx2 wiring, the process
-//! shells' loops, the supervisor, recording and plots. No algorithm lives here; it calls
+//! Process-side glue for the afs binaries (`processes/bin/`): the boards' loops, the supervisor,
+//! fault injection, the tools, and the plumbing they share. No algorithm lives here; it calls
 //! `afs_shared`.
+//!
+//! | folder | job |
+//! |---|---|
+//! | `boards/` | the board processes' loops: servo, sensor, estimator, and what they share |
+//! | `supervisor/` | `afs run` and `afs status`: stack file, children, restart policy, joining, footprint, report |
+//! | `chaos/` | `afs chaos`: the fault plan's spans and the injector |
+//! | `tools/` | `afs bench`, `afs experiment`, recording, plots and export |
+//! | `ipc`, `rt`, `hist`, `procfs` | iceoryx2 services, real-time set-up, latency histograms, `/proc` |
 
-pub mod bench;
-pub mod board;
+pub mod boards;
 pub mod chaos;
-pub mod estimator_board;
-pub mod experiment;
 pub mod hist;
 pub mod ipc;
-pub mod plot;
-pub mod record;
+pub mod procfs;
 pub mod rt;
-pub mod sensor_board;
-pub mod servo_board;
 pub mod supervisor;
+pub mod tools;

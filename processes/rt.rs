@@ -133,15 +133,6 @@ pub fn available_cpus() -> usize {
     }
 }
 
-/// Resident set size of a process (bytes), from /proc.
-pub fn resident_bytes(pid: u32) -> Option<u64> {
-    let s = std::fs::read_to_string(format!("/proc/{pid}/statm")).ok()?;
-    let pages: u64 = s.split_whitespace().nth(1)?.parse().ok()?;
-    // SAFETY: sysconf is a plain query.
-    let page = unsafe { libc::sysconf(libc::_SC_PAGESIZE) };
-    Some(pages * page.max(1) as u64)
-}
-
 /// Makes the calling process receive SIGTERM when its parent dies (so no board keeps running
 /// unsupervised), and exits at once if the parent is already gone. For `pre_exec`.
 pub fn die_with_parent(parent: libc::pid_t) -> io::Result<()> {

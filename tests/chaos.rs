@@ -265,10 +265,7 @@ fn a_killed_supervisor_takes_its_boards_and_the_next_run_cleans_up() {
         libc::kill(run.id() as i32, libc::SIGKILL);
     }
     let _ = run.0.as_mut().unwrap().wait();
-    let alive = |pid: i32| {
-        std::fs::read_to_string(format!("/proc/{pid}/stat"))
-            .is_ok_and(|s| s.split_whitespace().nth(2).is_none_or(|st| st != "Z"))
-    };
+    let alive = afs::procfs::alive;
     let t0 = Instant::now();
     while boards.iter().any(|&b| alive(b)) {
         assert!(

@@ -38,7 +38,9 @@ fn until(sim: &mut Lockstep, mode: ServoMode, limit: usize) -> usize {
 
 /// The estimator's answer to the pending probe run, as the estimator board computes it.
 fn estimate(servo: &ServoCore) -> TangentOutcome {
-    let req = servo.pending_probe().expect("a probe run awaits its estimate");
+    let req = servo
+        .pending_probe()
+        .expect("a probe run awaits its estimate");
     afs_shared::tangent::estimate(
         req.samples,
         req.plan,
@@ -100,10 +102,11 @@ fn reprobe_failure_and_no_answer() {
     sim.servo_mut().request_tangent_estimate();
     until(&mut sim, ServoMode::AwaitingEstimate, 240_000);
     let plan = sim.servo().params().tangent.reprobe_plan();
-    sim.servo_mut().apply_tangent_outcome(&TangentOutcome::Reprobe {
-        reason: ReprobeReason::Fold,
-        plan,
-    });
+    sim.servo_mut()
+        .apply_tangent_outcome(&TangentOutcome::Reprobe {
+            reason: ReprobeReason::Fold,
+            plan,
+        });
     assert_eq!(sim.servo().mode(), ServoMode::Probing);
     until(&mut sim, ServoMode::AwaitingEstimate, 240_000);
     assert!(sim.servo().pending_probe().unwrap().reprobe);

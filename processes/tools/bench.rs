@@ -149,9 +149,7 @@ fn part_name(p: Part) -> &'static str {
 }
 
 fn kernel() -> String {
-    std::fs::read_to_string("/proc/sys/kernel/osrelease")
-        .map(|s| s.trim().to_string())
-        .unwrap_or_default()
+    crate::procfs::kernel_release().unwrap_or_default()
 }
 
 /// Writes every series' `.hgrm`, the percentile plot, and returns the series' JSON.

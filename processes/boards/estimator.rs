@@ -6,7 +6,7 @@
 //! would have. It runs at normal priority on its own core and polls its ports every
 //! millisecond.
 
-use crate::board::Startup;
+use crate::boards::Startup;
 use crate::ipc;
 use crate::rt;
 use afs_shared::ident::IdentTick;

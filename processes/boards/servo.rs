@@ -8,7 +8,7 @@
 //! buffer and the probe record are allocated before the loop; iceoryx2 loans come from
 //! pre-mapped shared memory.
 
-use crate::board::Startup;
+use crate::boards::Startup;
 use crate::ipc::{self, Svc};
 use crate::{hist, rt};
 use afs_shared::msg::{

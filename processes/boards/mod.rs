@@ -1,19 +1,35 @@
-//! What the board binaries share: their common command-line options, loading the set-up, and
-//! the stop flag set by SIGINT/SIGTERM/SIGHUP.
+//! The board processes' loops ([`servo`], [`sensor`], [`estimator`]), and what they share:
+//! their common command-line options, loading the set-up, the stop flag set by
+//! SIGINT/SIGTERM/SIGHUP, and the start-up report.
 
-use crate::experiment::load_config;
+pub mod estimator;
+pub mod sensor;
+pub mod servo;
+
 use crate::ipc::{self, Svc};
 use crate::rt;
 use afs_shared::msg::{self, Board, BoardStartup};
 use afs_shared::scenario::Scenario;
 use afs_shared::sim::SimConfig;
-use anyhow::Result;
+use anyhow::{Context, Result};
 use iceoryx2::node::Node;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::update_connections::UpdateConnections;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+
+/// Reads a TOML set-up (any subset of `SimConfig`'s fields; the rest keep their defaults) and
+/// checks it.
+pub fn load_config(path: &Path) -> Result<SimConfig> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("reading config {}", path.display()))?;
+    let cfg: SimConfig =
+        toml::from_str(&text).with_context(|| format!("parsing config {}", path.display()))?;
+    cfg.validate()
+        .map_err(|e| anyhow::anyhow!("config {}: {e}", path.display()))?;
+    Ok(cfg)
+}
 
 /// Options every board takes.
 #[derive(Debug, Clone, clap::Args)]

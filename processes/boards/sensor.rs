@@ -6,7 +6,7 @@
 //! with every sample as the tare; when the first world sample arrives it lets its filter settle
 //! on it for 10 ms before publishing, as the lockstep does.
 
-use crate::board::Startup;
+use crate::boards::Startup;
 use crate::ipc;
 use crate::rt;
 use afs_shared::msg::{self, Board, PlantSample, WrenchFlags, WrenchSample};

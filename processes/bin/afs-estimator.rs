@@ -4,7 +4,7 @@
 //! afs-estimator --prefix afs --cpu 0
 //! ```
 
-use afs::board::{Common, Startup, stop_flag};
+use afs::boards::{Common, Startup, stop_flag};
 use clap::Parser;
 use std::process::ExitCode;
 
@@ -27,7 +27,7 @@ fn main() -> ExitCode {
             eprintln!("afs-estimator: warning: {w}");
         }
         let stop = stop_flag()?;
-        afs::estimator_board::run(&cli.common.prefix, startup, &stop)
+        afs::boards::estimator::run(&cli.common.prefix, startup, &stop)
     })();
     match result {
         Ok(_) => ExitCode::SUCCESS,

@@ -4,8 +4,8 @@
 //! afs experiment fig4.8 --out out --json     # deterministic in-process experiment
 //! ```
 
-use afs::experiment;
 use afs::supervisor;
+use afs::tools::experiment;
 use afs_shared::experiments::{NAMES, Options};
 use afs_shared::faults::FaultKind;
 use anyhow::Result;
@@ -66,7 +66,7 @@ fn run_stack(a: RunArgs, chaos: Option<supervisor::ChaosOptions>) -> Result<Exit
     {
         anyhow::bail!("--duration {d} must be a number of seconds ≥ 0");
     }
-    let stop = afs::board::stop_flag()?;
+    let stop = afs::boards::stop_flag()?;
     let opts = supervisor::RunOptions {
         config: a.config,
         scenario: a.scenario,
@@ -175,7 +175,7 @@ enum Command {
     Bench {
         /// hop, loop, stack or all.
         #[arg(value_enum, default_value = "all")]
-        part: afs::bench::Part,
+        part: afs::tools::bench::Part,
         /// Seconds of measurement per part (stack: this much without and with the hog).
         #[arg(long, default_value_t = 10.0)]
         duration: f64,
@@ -239,7 +239,7 @@ fn run() -> Result<ExitCode> {
             config,
         } => {
             let base = match &config {
-                Some(path) => experiment::load_config(path)?,
+                Some(path) => afs::boards::load_config(path)?,
                 None => Default::default(),
             };
             let opts = Options {
@@ -309,14 +309,14 @@ fn run() -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Plot { file, out } => {
-            let fig = afs::record::figure(&file)?;
+            let fig = afs::tools::record::figure(&file)?;
             let out = out.unwrap_or_else(|| file.with_extension("svg"));
-            afs::plot::render(&fig, &out)?;
+            afs::tools::plot::render(&fig, &out)?;
             say!("wrote {}", out.display());
             Ok(ExitCode::SUCCESS)
         }
         Command::Export { file, out } => {
-            for f in afs::record::export_csv(&file, &out)? {
+            for f in afs::tools::record::export_csv(&file, &out)? {
                 say!("wrote {}", f.display());
             }
             Ok(ExitCode::SUCCESS)
@@ -328,14 +328,14 @@ fn run() -> Result<ExitCode> {
             prefix,
             json,
         } => {
-            let stop = afs::board::stop_flag()?;
-            let opts = afs::bench::BenchOptions {
+            let stop = afs::boards::stop_flag()?;
+            let opts = afs::tools::bench::BenchOptions {
                 part,
                 duration_s: duration,
                 out,
                 prefix,
             };
-            let r = afs::bench::run(&opts, &stop)?;
+            let r = afs::tools::bench::run(&opts, &stop)?;
             if json {
                 say!("{}", serde_json::to_string_pretty(&r)?);
             } else {
@@ -352,7 +352,7 @@ fn run() -> Result<ExitCode> {
             socket,
             cpu,
         } => {
-            afs::bench::peer(&prefix, &socket, cpu)?;
+            afs::tools::bench::peer(&prefix, &socket, cpu)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Messages => {

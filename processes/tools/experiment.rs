@@ -1,27 +1,14 @@
 //! `afs experiment NAME`: runs one of the in-process lockstep experiments, writes its plot and
 //! returns its JSON report.
 
-use crate::plot;
+use crate::tools::plot;
 use afs_shared::error::ExperimentError;
 use afs_shared::experiments::{self, Options, Outcome};
-use afs_shared::sim::SimConfig;
 use anyhow::{Context, Result, bail};
 use serde::Serialize;
 use serde_json::{Value, json};
 use std::path::Path;
 use std::time::Instant;
-
-/// Reads a TOML set-up (any subset of `SimConfig`'s fields; the rest keep their defaults) and
-/// checks it.
-pub fn load_config(path: &Path) -> Result<SimConfig> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("reading config {}", path.display()))?;
-    let cfg: SimConfig =
-        toml::from_str(&text).with_context(|| format!("parsing config {}", path.display()))?;
-    cfg.validate()
-        .map_err(|e| anyhow::anyhow!("config {}: {e}", path.display()))?;
-    Ok(cfg)
-}
 
 /// The JSON report of one experiment: its name, the pass/fail of its checks, the measured
 /// summary, the plot path and timing (documented in docs/experiments.md).
@@ -29,7 +16,7 @@ pub fn run(name: &str, opts: &Options, out_dir: &Path) -> Result<(Value, bool)> 
     std::fs::create_dir_all(out_dir)
         .with_context(|| format!("creating output directory {}", out_dir.display()))?;
     let started = Instant::now();
-    let cpu0 = cpu_seconds();
+    let cpu0 = crate::procfs::cpu_seconds();
     let (report, figure, passed, simulated) = match name {
         "friction-id" => pack(experiments::friction_id(opts))?,
         "fig4.5" => pack(experiments::fig4_5(opts))?,
@@ -47,7 +34,7 @@ pub fn run(name: &str, opts: &Options, out_dir: &Path) -> Result<(Value, bool)> 
         ),
     };
     let wall = started.elapsed().as_secs_f64();
-    let cpu = cpu_seconds() - cpu0;
+    let cpu = crate::procfs::cpu_seconds() - cpu0;
     let file = out_dir.join(format!("{}.svg", name.replace('.', "_")));
     plot::render(&figure, &file)?;
     let mut obj = report;
@@ -71,16 +58,4 @@ fn pack<S: Serialize>(
     let passed = o.passed();
     let v = serde_json::to_value(&o).context("serialising the report")?;
     Ok((v, o.figure, passed, o.simulated_s))
-}
-
-/// CPU time of this process (user + system), in seconds.
-pub fn cpu_seconds() -> f64 {
-    // /proc/self/stat fields 14 and 15 are utime and stime in clock ticks (100 Hz on Linux).
-    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
-        return 0.0;
-    };
-    let after = stat.rsplit_once(')').map(|(_, r)| r).unwrap_or("");
-    let f: Vec<&str> = after.split_whitespace().collect();
-    let ticks = |i: usize| f.get(i).and_then(|s| s.parse::<f64>().ok()).unwrap_or(0.0);
-    (ticks(11) + ticks(12)) / 100.0
 }

@@ -4,8 +4,8 @@
 //! afs-sensor --prefix afs --scenario surface-tracking --cpu 1 --priority 85
 //! ```
 
-use afs::board::{Common, stop_flag};
-use afs::sensor_board::{SensorArgs, run};
+use afs::boards::sensor::{SensorArgs, run};
+use afs::boards::{Common, stop_flag};
 use clap::Parser;
 use std::process::ExitCode;
 

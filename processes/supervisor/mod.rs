@@ -9,8 +9,9 @@
 
 use crate::chaos::{Action, BoardView, Injector, ServoView};
 use crate::ipc::{self, Svc};
-use crate::record::{Rec, RecordSummary, Recorder};
+use crate::procfs::{self, Rss};
 use crate::rt;
+use crate::tools::record::{Rec, RecordSummary, Recorder};
 use afs_shared::faults::{self, Board, FaultFigures, FaultKind, FaultMonitor};
 use afs_shared::msg::{
     self, BoardStartup, FrictionReport, FrictionStatus, LoopFlags, LoopStats, PlantSample,
@@ -33,7 +34,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 /// The built-in stack file.
-pub const DEFAULT_STACK: &str = include_str!("../examples/stack.toml");
+pub const DEFAULT_STACK: &str = include_str!("../../examples/stack.toml");
 
 /// When to restart a process that ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
@@ -363,32 +364,13 @@ struct Footprint {
     boards_rss_kib: Rss,
 }
 
-/// Resident memory (KiB).
-#[derive(Debug, Clone, Copy, Default, Serialize)]
-struct Rss {
-    /// Private: heap, stacks (RssAnon).
-    anon: u64,
-    /// All (VmRSS).
-    total: u64,
-}
-
-impl std::ops::Add for Rss {
-    type Output = Rss;
-    fn add(self, o: Rss) -> Rss {
-        Rss {
-            anon: self.anon + o.anon,
-            total: self.total + o.total,
-        }
-    }
-}
-
 impl Footprint {
     fn now(prefix: &str, procs: &[Proc], t0: Instant) -> Self {
         let files = ipc::leftovers(prefix);
         let boards_rss_kib = procs
             .iter()
             .filter(|p| p.state == ProcessState::Running)
-            .map(|p| rss_kib(p.pid()))
+            .map(|p| procfs::rss(p.pid()))
             .fold(Rss::default(), |a, b| a + b);
         let stale = ipc::stale_files(prefix).unwrap_or_default();
         Footprint {
@@ -404,7 +386,7 @@ impl Footprint {
                 .filter(|m| m.is_file())
                 .map(|m| m.len())
                 .sum(),
-            supervisor_rss_kib: rss_kib(std::process::id() as i32),
+            supervisor_rss_kib: procfs::rss(std::process::id() as i32),
             boards_rss_kib,
         }
     }
@@ -433,22 +415,6 @@ fn describe_file(f: &Path, prefix: &str, procs: &[Proc]) -> String {
         f.display().to_string()
     } else {
         format!("{} ({})", f.display(), pids.join(" → "))
-    }
-}
-
-/// Resident memory of a process (KiB; 0 if unknown).
-fn rss_kib(pid: i32) -> Rss {
-    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();
-    let field = |name: &str| {
-        status
-            .lines()
-            .find_map(|l| l.strip_prefix(name))
-            .and_then(|v| v.split_whitespace().next()?.parse().ok())
-            .unwrap_or(0)
-    };
-    Rss {
-        anon: field("RssAnon:"),
-        total: field("VmRSS:"),
     }
 }
 
@@ -1187,7 +1153,7 @@ fn chaos_plan(
             + tangent.settle_s
             + 0.3,
         probe_s: tangent.first_plan().duration(),
-        retry_s: crate::servo_board::ESTIMATOR_TIMEOUT_S + 0.5,
+        retry_s: crate::boards::servo::ESTIMATOR_TIMEOUT_S + 0.5,
         thaw_s: crate::chaos::THAW_AFTER.as_secs_f64(),
         burst_s: 0.05,
     };

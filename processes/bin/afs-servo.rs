@@ -5,8 +5,8 @@
 //! ```
 //! Normally started by `afs run`; it waits for `afs-sensor` with the same prefix.
 
-use afs::board::{Common, stop_flag};
-use afs::servo_board::{ServoArgs, ServoEnd, run};
+use afs::boards::servo::{ServoArgs, ServoEnd, run};
+use afs::boards::{Common, stop_flag};
 use clap::Parser;
 use std::process::ExitCode;
 
@@ -26,7 +26,7 @@ struct Cli {
     #[arg(long, default_value_t = 1.5)]
     max_force_age_ms: f64,
     /// Seconds the estimator has to answer before the request is re-sent.
-    #[arg(long, default_value_t = afs::servo_board::ESTIMATOR_TIMEOUT_S)]
+    #[arg(long, default_value_t = afs::boards::servo::ESTIMATOR_TIMEOUT_S)]
     estimator_timeout: f64,
     /// Sends of one request before keeping the old tangent.
     #[arg(long, default_value_t = 10)]
