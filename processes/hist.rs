@@ -6,7 +6,7 @@
 use anyhow::{Context, Result};
 use hdrhistogram::Histogram;
 use hdrhistogram::serialization::{Deserializer, Serializer, V2Serializer};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::Path;
 
@@ -28,7 +28,7 @@ pub fn save(h: &Histogram<u64>, path: &Path) -> Result<()> {
     let mut buf = Vec::new();
     V2Serializer::new()
         .serialize(h, &mut buf)
-        .map_err(|e| anyhow::anyhow!("encoding a histogram: {e:?}"))?;
+        .context("encoding a histogram")?;
     std::fs::write(path, buf).with_context(|| format!("writing {}", path.display()))
 }
 
@@ -37,7 +37,7 @@ pub fn load(path: &Path) -> Result<Histogram<u64>> {
     let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
     Deserializer::new()
         .deserialize(&mut bytes.as_slice())
-        .map_err(|e| anyhow::anyhow!("decoding the histogram {}: {e:?}", path.display()))
+        .with_context(|| format!("decoding the histogram {}", path.display()))
 }
 
 /// Writes the percentile distribution of `h` (values in µs) in HdrHistogram's `.hgrm` text.
@@ -71,21 +71,27 @@ pub fn write_hgrm(h: &Histogram<u64>, path: &Path) -> Result<()> {
 }
 
 /// The percentiles a report carries (µs).
-#[derive(Debug, Clone, Copy, Serialize, PartialEq)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
 pub struct Summary {
     /// Values recorded.
     pub count: u64,
     /// Median (µs).
+    #[serde(deserialize_with = "afs_shared::nan::or_null")]
     pub p50: f64,
     /// 90th percentile (µs).
+    #[serde(deserialize_with = "afs_shared::nan::or_null")]
     pub p90: f64,
     /// 99th percentile (µs).
+    #[serde(deserialize_with = "afs_shared::nan::or_null")]
     pub p99: f64,
     /// 99.9th percentile (µs).
+    #[serde(deserialize_with = "afs_shared::nan::or_null")]
     pub p99_9: f64,
     /// 99.99th percentile (µs).
+    #[serde(deserialize_with = "afs_shared::nan::or_null")]
     pub p99_99: f64,
     /// Largest (µs).
+    #[serde(deserialize_with = "afs_shared::nan::or_null")]
     pub max: f64,
 }
 

@@ -54,7 +54,7 @@ pub fn config(prefix: &str) -> Result<Config> {
     check_prefix(prefix)?;
     let mut c = Config::default();
     c.global.prefix = FileName::new(file_prefix(prefix).as_bytes())
-        .map_err(|e| anyhow::anyhow!("stack prefix '{prefix}': {e:?}"))?;
+        .with_context(|| format!("stack prefix '{prefix}'"))?;
     Ok(c)
 }
 
@@ -64,18 +64,17 @@ pub fn node(prefix: &str, name: &str) -> Result<Node<Svc>> {
     let cfg = config(prefix)?;
     let node_name: NodeName = name
         .try_into()
-        .map_err(|e| anyhow::anyhow!("node name '{name}': {e:?}"))?;
+        .with_context(|| format!("node name '{name}'"))?;
     NodeBuilder::new()
         .name(&node_name)
         .config(&cfg)
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<Svc>()
-        .map_err(|e| anyhow::anyhow!("creating iceoryx2 node '{name}' for stack '{prefix}': {e:?}"))
+        .with_context(|| format!("creating iceoryx2 node '{name}' for stack '{prefix}'"))
 }
 
 pub fn name(s: &str) -> Result<ServiceName> {
-    s.try_into()
-        .map_err(|e| anyhow::anyhow!("service name '{s}': {e:?}"))
+    s.try_into().with_context(|| format!("service name '{s}'"))
 }
 
 /// A per-tick stream (plant or servo samples).
@@ -96,7 +95,7 @@ where
         .max_publishers(1)
         .max_nodes(8)
         .open_or_create()
-        .map_err(|e| anyhow::anyhow!("opening service '{service_name}': {e:?}"))
+        .with_context(|| format!("opening service '{service_name}'"))
 }
 
 /// The plant stream.
@@ -125,7 +124,7 @@ pub fn wrench(node: &Node<Svc>) -> Result<publish_subscribe::PortFactory<Svc, Wr
         .max_publishers(3)
         .max_nodes(12)
         .open_or_create()
-        .map_err(|e| anyhow::anyhow!("opening service '{}': {e:?}", service::WRENCH))
+        .with_context(|| format!("opening service '{}'", service::WRENCH))
 }
 
 /// A low-rate status stream (history 1 so a late subscriber gets the latest at once).
@@ -145,7 +144,7 @@ where
         .max_publishers(1)
         .max_nodes(12)
         .open_or_create()
-        .map_err(|e| anyhow::anyhow!("opening service '{service_name}': {e:?}"))
+        .with_context(|| format!("opening service '{service_name}'"))
 }
 
 /// The loop statistics stream.
@@ -179,7 +178,7 @@ pub fn command(node: &Node<Svc>) -> Result<publish_subscribe::PortFactory<Svc, S
         .max_publishers(4)
         .max_nodes(12)
         .open_or_create()
-        .map_err(|e| anyhow::anyhow!("opening service '{}': {e:?}", service::COMMAND))
+        .with_context(|| format!("opening service '{}'", service::COMMAND))
 }
 
 /// The boards' start-up reports: one publisher per board process (and room for dead ones not
@@ -194,7 +193,7 @@ pub fn startup(node: &Node<Svc>) -> Result<publish_subscribe::PortFactory<Svc, B
         .max_publishers(16)
         .max_nodes(24)
         .open_or_create()
-        .map_err(|e| anyhow::anyhow!("opening service '{}': {e:?}", service::STARTUP))
+        .with_context(|| format!("opening service '{}'", service::STARTUP))
 }
 
 /// An estimation service: requests are a slice of samples behind a header, one response each.
@@ -220,7 +219,7 @@ where
         .max_clients(4)
         .max_nodes(8)
         .open_or_create()
-        .map_err(|e| anyhow::anyhow!("opening service '{service_name}': {e:?}"))
+        .with_context(|| format!("opening service '{service_name}'"))
 }
 
 /// The tangent-estimation request-response service.
@@ -263,7 +262,7 @@ pub fn create_world(node: &Node<Svc>) -> Result<blackboard::PortFactory<Svc, u64
         b = b.add::<WorldSnapshot>(k, WorldSnapshot::default());
     }
     b.create()
-        .map_err(|e| anyhow::anyhow!("creating blackboard '{}': {e:?}", service::WORLD))
+        .with_context(|| format!("creating blackboard '{}'", service::WORLD))
 }
 
 /// Opens the world-state blackboard, if the supervisor made one.
@@ -343,7 +342,7 @@ pub fn census(prefix: &str, clean: bool) -> Result<NodeCensus> {
         }
         CallbackProgression::Continue
     })
-    .map_err(|e| anyhow::anyhow!("listing iceoryx2 nodes of stack '{prefix}': {e:?}"))?;
+    .with_context(|| format!("listing iceoryx2 nodes of stack '{prefix}'"))?;
     if clean {
         for v in dead {
             match v.try_remove_stale_resources() {
@@ -378,7 +377,7 @@ fn stale_scan(prefix: &str) -> Result<Vec<PathBuf>> {
         }
         CallbackProgression::Continue
     })
-    .map_err(|e| anyhow::anyhow!("listing iceoryx2 nodes of stack '{prefix}': {e:?}"))?;
+    .with_context(|| format!("listing iceoryx2 nodes of stack '{prefix}'"))?;
     let fp = file_prefix(prefix);
     let stem = |f: &Path| -> Option<(String, String)> {
         let name = f.file_name()?.to_str()?;

@@ -2,10 +2,10 @@
 //! CPU time of this one, the kernel's release.
 
 use procfs::process::Process;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Resident memory of a process (KiB).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Rss {
     /// Private: heap and stacks (RssAnon).
     pub anon: u64,

@@ -1,8 +1,8 @@
 //! `afs bench all --duration 1`: a smoke run that checks the report's shape (every part, every
-//! series with its percentiles, ratios to floors, targets, files written), not its numbers.
+//! series with its percentiles, ratios to floors, targets, files written), read back as the typed report, not its numbers.
 //! It starts stacks, so it runs alone in its own test binary with its own prefix.
 
-use serde_json::Value;
+use afs::tools::bench::BenchReport;
 use std::process::Command;
 
 #[test]
@@ -28,9 +28,9 @@ fn bench_all_reports_every_series() {
         "afs bench failed: {}",
         String::from_utf8_lossy(&run.stderr)
     );
-    let r: Value = serde_json::from_slice(&run.stdout).unwrap();
-    assert_eq!(r["bench"], "all");
-    assert_eq!(r["interrupted"], false);
+    let r: BenchReport = serde_json::from_slice(&run.stdout).unwrap();
+    assert_eq!(r.bench, "all");
+    assert!(!r.interrupted);
     let expect: [(&str, &[&str]); 3] = [
         (
             "hop",
@@ -53,36 +53,38 @@ fn bench_all_reports_every_series() {
             &["servo_wake", "force_age", "servo_wake_hog", "force_age_hog"],
         ),
     ];
-    for (part, names) in expect {
-        let series = r[part]["series"]
-            .as_object()
-            .unwrap_or_else(|| panic!("{part}: no series in {r}"));
+    let parts = r.parts();
+    assert_eq!(
+        parts.iter().map(|p| p.0).collect::<Vec<_>>(),
+        ["hop", "loop", "stack"]
+    );
+    for ((part, names), (name, report)) in expect.into_iter().zip(parts) {
+        assert_eq!(part, name);
+        assert_eq!(report.series.len(), names.len(), "{part}: series");
         for n in names {
-            let s = &series[*n];
-            let sum = &s["summary_us"];
-            assert!(sum["count"].as_u64().unwrap() > 0, "{part}/{n}: empty");
-            for k in ["p50", "p90", "p99", "p99_9", "p99_99", "max"] {
-                let v = sum[k].as_f64().unwrap_or(f64::NAN);
-                assert!(v.is_finite() && v > 0.0, "{part}/{n}: {k} = {v}");
+            let s = report
+                .series
+                .get(*n)
+                .unwrap_or_else(|| panic!("{part}: no series {n}"));
+            let q = &s.summary_us;
+            assert!(q.count > 0, "{part}/{n}: empty");
+            for v in [q.p50, q.p90, q.p99, q.p99_9, q.p99_99, q.max] {
+                assert!(v.is_finite() && v > 0.0, "{part}/{n}: {q:?}");
             }
-            if s.get("floor").is_some() {
-                assert!(s["ratio_to_floor"]["p99"].as_f64().is_some(), "{part}/{n}");
-            }
+            assert_eq!(s.floor.is_some(), s.ratio_to_floor.is_some(), "{part}/{n}");
         }
-        let targets = r[part]["targets"].as_array().unwrap();
-        assert!(!targets.is_empty(), "{part}: no targets");
-        for t in targets {
-            assert!(t["met"].is_boolean() && t["value"].is_number(), "{t}");
+        assert!(!report.targets.is_empty(), "{part}: no targets");
+        for t in &report.targets {
+            assert!(t.is_target() && t.value.is_finite(), "{t:?}");
         }
-        for f in r[part]["files"].as_array().unwrap() {
-            let p = std::path::Path::new(f.as_str().unwrap());
+        for f in &report.files {
+            let p = std::path::Path::new(f);
             assert!(p.is_file(), "{part}: {} not written", p.display());
         }
     }
-    let h = &r["hop"];
+    let h = &r.hop.as_ref().unwrap().part.series;
     assert_eq!(
-        h["series"]["afs_poll_rtt"]["summary_us"]["count"],
-        h["series"]["unix_socket_rtt"]["summary_us"]["count"],
+        h["afs_poll_rtt"].summary_us.count, h["unix_socket_rtt"].summary_us.count,
         "every hop series has the same sample count"
     );
     for p in ["h", "l", "s0", "s1", "s2", "s3"] {

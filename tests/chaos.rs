@@ -9,7 +9,9 @@
 //! reports them and docs/reliability.md gives their distribution; here a time is only bounded
 //! relative to the configured policy with an allowance a stalled VM cannot use up.
 
-use serde_json::Value;
+use afs::chaos::FaultRecord;
+use afs::supervisor::RunReport;
+use afs_shared::servo::ServoMode;
 use std::process::Output;
 use std::time::{Duration, Instant};
 
@@ -17,30 +19,26 @@ mod common;
 use common::*;
 
 /// `afs chaos ... --json` on its own prefix; returns the report (and asserts it is one).
-fn chaos(p: &str, args: &[&str]) -> (Output, Value) {
+fn chaos(p: &str, args: &[&str]) -> (Output, RunReport) {
     let out = afs()
         .args(["chaos", "--json", "--quiet", "--prefix", p])
         .args(args)
         .output()
         .unwrap();
-    let r = json_of(&out);
+    let r = run_report(&out);
     (out, r)
 }
 
 /// Every correctness check passed (the targets may be missed on a loaded machine: then the run
 /// exits with 1, and that is all a missed target may change).
-fn assert_correct(out: &Output, r: &Value) {
-    let failed: Vec<&Value> = r["checks"]
-        .as_array()
-        .unwrap()
+fn assert_correct(out: &Output, r: &RunReport) {
+    let failed: Vec<String> = r
+        .checks
         .iter()
-        .filter(|c| c["pass"] != true && c["kind"] != "target")
+        .filter(|c| !c.pass && !c.is_target())
+        .map(|c| c.line())
         .collect();
-    let all_targets_met = r["checks"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .all(|c| c["pass"] == true || c["kind"] != "target");
+    let all_targets_met = r.checks.iter().all(|c| c.pass || !c.is_target());
     let code = out.status.code();
     assert!(
         failed.is_empty() && (code == Some(0) || (code == Some(1) && !all_targets_met)),
@@ -50,13 +48,9 @@ fn assert_correct(out: &Output, r: &Value) {
 }
 
 /// `afs run` has no targets: every check must pass.
-fn assert_passed(out: &Output, r: &Value) {
+fn assert_passed(out: &Output, r: &RunReport) {
     assert_correct(out, r);
-    assert!(
-        out.status.success() && r["passed"] == true,
-        "{}",
-        r["checks"]
-    );
+    assert!(out.status.success() && r.passed, "{}", failed(r));
 }
 
 /// Time a restarted board may take beyond its backoff in these tests (ms): restarts take
@@ -68,36 +62,33 @@ const RESTART_ALLOWANCE_MS: f64 = 3000.0;
 const SAFE_ALLOWANCE_MS: f64 = 10.0;
 
 /// The fault came back within its backoff plus [`RESTART_ALLOWANCE_MS`].
-fn assert_back_in_time(fault: &Value) {
-    let backoff = f(&fault["restart"]["backoff_ms"]);
-    let back = f(&fault["back_ms"]);
-    let detected = fault["detected_ms"].as_f64().unwrap_or(0.0);
+fn assert_back_in_time(fault: &FaultRecord) {
+    let backoff = fault
+        .restart
+        .and_then(|t| t.backoff_ms)
+        .unwrap_or_else(|| panic!("no restart backoff: {fault:?}"));
+    let back = fault
+        .back_ms
+        .unwrap_or_else(|| panic!("never back: {fault:?}"));
+    let detected = fault.detected_ms.unwrap_or(0.0);
     assert!(
         back <= detected + backoff + RESTART_ALLOWANCE_MS,
-        "back after {back} ms (backoff {backoff} ms): {fault}"
+        "back after {back} ms (backoff {backoff} ms): {fault:?}"
     );
 }
 
-fn process<'a>(r: &'a Value, name: &str) -> &'a Value {
-    r["processes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|p| p["name"] == name)
-        .unwrap()
+/// The chaos part of a report.
+fn chaos_of(r: &RunReport) -> &afs::chaos::ChaosReport {
+    r.chaos.as_ref().expect("a chaos report")
 }
 
-fn faults_of<'a>(r: &'a Value, kind: &str) -> Vec<&'a Value> {
-    r["chaos"]["faults"]
-        .as_array()
-        .unwrap()
+/// The faults of one kind.
+fn faults_of<'a>(r: &'a RunReport, kind: &str) -> Vec<&'a FaultRecord> {
+    chaos_of(r)
+        .faults
         .iter()
-        .filter(|f| f["kind"] == kind)
+        .filter(|f| f.kind == kind)
         .collect()
-}
-
-fn f(v: &Value) -> f64 {
-    v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
 }
 
 /// The sensor killed at a random moment, killed while the servo dithers to probe (it asks for
@@ -124,18 +115,19 @@ fn sensor_killed_or_frozen_the_servo_stays_safe_and_recovers() {
         ],
     );
     assert_correct(&out, &r);
-    assert_eq!(r["chaos"]["injected"], 3);
-    let fl = &r["faults"];
+    assert_eq!(chaos_of(&r).injected, 3);
+    let fl = &r.faults;
     // Every fault sends the servo to its safe state; entries where the machine stalled the
     // servo itself are counted apart (docs/reliability.md).
-    let on_time =
-        fl["safe_entries"].as_u64().unwrap() - fl["safe_entries_servo_stalled"].as_u64().unwrap();
-    assert!(on_time >= 1, "{fl}");
     assert!(
-        f(&fl["safe_after_last_good_ms_max"]) <= 1.5 + SAFE_ALLOWANCE_MS,
-        "{fl}"
+        fl.safe_entries - fl.safe_entries_servo_stalled >= 1,
+        "{fl:?}"
     );
-    assert!(f(&fl["normal_force_max_over_preload"]) <= 3.0, "{fl}");
+    assert!(
+        fl.safe_after_last_good_ms_max <= 1.5 + SAFE_ALLOWANCE_MS,
+        "{fl:?}"
+    );
+    assert!(fl.normal_force_max_over_preload <= 3.0, "{fl:?}");
     for kind in ["kill-sensor", "kill-sensor-mid-probe", "freeze-sensor"] {
         let k = faults_of(&r, kind);
         assert_eq!(k.len(), 1, "{kind}");
@@ -143,18 +135,18 @@ fn sensor_killed_or_frozen_the_servo_stays_safe_and_recovers() {
     }
     let mid = faults_of(&r, "kill-sensor-mid-probe")[0];
     assert_eq!(
-        mid["servo_mode"], "probing",
-        "not killed while probing: {mid}"
+        mid.servo_mode,
+        Some(ServoMode::Probing),
+        "not killed while probing: {mid:?}"
     );
     let frozen = faults_of(&r, "freeze-sensor")[0];
     assert!(
-        f(&frozen["detected_ms"]) >= 100.0,
-        "before the stall limit: {frozen}"
+        frozen.detected_ms.is_some_and(|d| d >= 100.0),
+        "before the stall limit: {frozen:?}"
     );
     let sensor = process(&r, "sensor");
-    assert_eq!(sensor["restarts"], 3);
-    assert_eq!(sensor["stalls_killed"], 1);
-    assert_eq!(r["stack"]["tracking"]["ticks_without_contact"], 0);
+    assert_eq!((sensor.restarts, sensor.stalls_killed), (3, 1));
+    assert_eq!(r.stack.tracking.ticks_without_contact, 0);
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
 }
 
@@ -182,30 +174,28 @@ fn estimator_killed_mid_request_answers_after_the_restart() {
     assert_correct(&out, &r);
     let mid = faults_of(&r, "kill-estimator-mid-request")[0];
     assert_eq!(
-        mid["servo_mode"], "awaiting_estimate",
-        "not killed mid-request: {mid}"
+        mid.servo_mode,
+        Some(ServoMode::AwaitingEstimate),
+        "not killed mid-request: {mid:?}"
     );
     // A probe the servo cut short (a VM stall put it in its safe state) sends no request: the
     // injector lets the estimator go and waits for the next probe, noting it; never thawed.
-    assert_eq!(mid["thawed"], false, "{mid}");
-    let est = &r["loop"]["estimator"];
-    assert!(est["retries"].as_u64().unwrap() >= 1, "{est}");
-    assert!(est["answers"].as_u64().unwrap() >= 1, "{est}");
-    let e = &r["stack"]["tracking"]["estimations"];
-    assert!(e["estimates"].as_u64().unwrap() >= 1, "{e}");
-    assert_eq!(e["failures"], 0, "{e}");
+    assert!(!mid.thawed, "{mid:?}");
+    let est = r.loop_stats.expect("loop statistics").estimator;
+    assert!(est.retries >= 1 && est.answers >= 1, "{est:?}");
+    let e = &r.stack.tracking.estimations;
+    assert!(e.estimates >= 1 && e.failures == 0, "{e:?}");
     // The tangent after the retried estimate is as right as without the fault: the run's
     // tangent error is within 0.5° RMS of the fault-free lockstep reference's.
-    let (t, reference) = (&r["stack"]["tracking"], &r["reference"]["tracking"]);
+    let (t, reference) = (&r.stack.tracking, &r.reference.tracking);
     assert!(
-        f(&t["tangent_error_rms_deg"]) <= f(&reference["tangent_error_rms_deg"]) + 0.5,
-        "{t}\nreference: {reference}"
+        t.tangent_error_rms_deg <= reference.tangent_error_rms_deg + 0.5,
+        "{t:?}\nreference: {reference:?}"
     );
     let frozen = faults_of(&r, "freeze-estimator")[0];
-    assert!(frozen["detected_ms"].as_f64().is_some(), "{frozen}");
+    assert!(frozen.detected_ms.is_some(), "{frozen:?}");
     let estimator = process(&r, "estimator");
-    assert_eq!(estimator["restarts"], 2);
-    assert_eq!(estimator["stalls_killed"], 1);
+    assert_eq!((estimator.restarts, estimator.stalls_killed), (2, 1));
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
 }
 
@@ -230,20 +220,25 @@ fn bad_samples_are_counted_and_never_reach_the_controller() {
         ],
     );
     assert_correct(&out, &r);
-    let sent = &r["chaos"]["bad_samples"]["sent"];
-    for k in ["nan", "infinite", "absurd", "repeat", "backwards", "future"] {
-        assert_eq!(sent[k], 5, "{k}: {sent}");
-    }
-    let b = &r["loop"]["bad_samples"];
-    let n = |k: &str| b[k].as_u64().unwrap();
-    assert_eq!(n("non_finite"), 10, "{b}");
-    assert_eq!(n("out_of_range"), 5, "{b}");
-    assert_eq!(n("future"), 5, "{b}");
-    assert_eq!(n("seq_repeat") + n("seq_backwards"), 10, "{b}");
-    assert!(n("seq_backwards") >= 5, "{b}");
-    assert_eq!(r["faults"]["controller_non_finite"], 0);
-    assert!(f(&r["faults"]["controller_force_max_abs_n"]) < 130.0);
-    assert_eq!(r["agreement"]["agrees"], true, "{}", r["agreement"]);
+    let sent = chaos_of(&r).bad_samples.sent;
+    let each = [
+        sent.nan,
+        sent.infinite,
+        sent.absurd,
+        sent.repeat,
+        sent.backwards,
+        sent.future,
+    ];
+    assert_eq!(each, [5; 6], "{sent:?}");
+    let b = r.loop_stats.expect("loop statistics").bad_samples;
+    assert_eq!(b.non_finite, 10, "{b:?}");
+    assert_eq!(b.out_of_range, 5, "{b:?}");
+    assert_eq!(b.future, 5, "{b:?}");
+    assert_eq!(b.seq_repeat + b.seq_backwards, 10, "{b:?}");
+    assert!(b.seq_backwards >= 5, "{b:?}");
+    assert_eq!(r.faults.controller_non_finite, 0);
+    assert!(r.faults.controller_force_max_abs_n < 130.0);
+    assert!(r.agreement.agrees, "{:#?}", r.agreement);
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
 }
 
@@ -289,7 +284,7 @@ fn a_killed_supervisor_takes_its_boards_and_the_next_run_cleans_up() {
         ])
         .output()
         .unwrap();
-    let r = json_of(&out);
+    let r = run_report(&out);
     assert_passed(&out, &r);
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
 }
@@ -317,7 +312,7 @@ fn servo_killed_or_frozen_resumes_the_world_and_its_controller() {
         ],
     );
     assert_correct(&out, &r);
-    assert_eq!(r["chaos"]["injected"], 3);
+    assert_eq!(chaos_of(&r).injected, 3);
     for kind in ["kill-servo", "freeze-servo", "kill-servo-mid-probe"] {
         let k = faults_of(&r, kind);
         assert_eq!(k.len(), 1, "{kind}");
@@ -325,32 +320,33 @@ fn servo_killed_or_frozen_resumes_the_world_and_its_controller() {
     }
     let frozen = faults_of(&r, "freeze-servo")[0];
     assert!(
-        f(&frozen["detected_ms"]) >= 500.0,
-        "before the stall limit: {frozen}"
+        frozen.detected_ms.is_some_and(|d| d >= 500.0),
+        "before the stall limit: {frozen:?}"
     );
     let mid = faults_of(&r, "kill-servo-mid-probe")[0];
     assert_eq!(
-        mid["servo_mode"], "probing",
-        "not killed while probing: {mid}"
+        mid.servo_mode,
+        Some(ServoMode::Probing),
+        "not killed while probing: {mid:?}"
     );
     let servo = process(&r, "servo");
-    assert_eq!(servo["restarts"], 3);
-    assert_eq!(servo["stalls_killed"], 1);
-    let s = &r["samples"];
-    assert_eq!(s["plant_received"], 100_001, "{s}");
-    assert_eq!(s["plant_lost"], 0, "{s}");
-    assert_eq!(s["reordered"], 0, "{s}");
+    assert_eq!((servo.restarts, servo.stalls_killed), (3, 1));
+    let s = &r.samples;
+    assert_eq!(
+        (s.plant_received, s.plant_lost, s.reordered),
+        (100_001, 0, 0),
+        "{s:?}"
+    );
     // Resumed, not restarted afresh: no transient of a controller that forgot its state.
     let preload = 2.5;
     assert!(
-        f(&r["faults"]["normal_force_max_after_servo_restart_n"]) <= 2.0 * preload,
-        "{}",
-        r["faults"]
+        r.faults.normal_force_max_after_servo_restart_n <= 2.0 * preload,
+        "{:?}",
+        r.faults
     );
     // The probe cut by the kill ran again from its start.
-    let e = &r["stack"]["tracking"]["estimations"];
-    assert!(e["started"].as_u64().unwrap() >= 1, "{e}");
-    assert_eq!(r["agreement"]["agrees"], true, "{}", r["agreement"]);
+    assert!(r.stack.tracking.estimations.started >= 1);
+    assert!(r.agreement.agrees, "{:#?}", r.agreement);
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
 }
 
@@ -378,35 +374,42 @@ fn soak_fifty_random_kills() {
         ],
     );
     assert_correct(&out, &r);
-    let c = &r["chaos"];
-    assert_eq!(c["injected"], 50);
-    for fault in c["faults"].as_array().unwrap() {
+    let c = chaos_of(&r);
+    assert_eq!(c.injected, 50);
+    for fault in &c.faults {
         assert_back_in_time(fault);
     }
-    let s = &r["samples"];
-    assert_eq!(s["plant_received"], 1_200_001, "{s}");
-    assert_eq!(s["plant_lost"], 0, "{s}");
-    assert_eq!(s["reordered"], 0, "{s}");
+    let s = &r.samples;
+    assert_eq!(
+        (s.plant_received, s.plant_lost, s.reordered),
+        (1_200_001, 0, 0),
+        "{s:?}"
+    );
     let servo_kills = faults_of(&r, "kill-servo").len() as u64;
     assert!(servo_kills > 0);
-    assert_eq!(process(&r, "servo")["restarts"].as_u64(), Some(servo_kills));
-    assert!(s["servo_lost"].as_u64().unwrap() <= servo_kills, "{s}");
+    assert_eq!(u64::from(process(&r, "servo").restarts), servo_kills);
+    assert!(s.servo_lost <= servo_kills, "{s:?}");
     // Each restarted servo sends its predecessor's last tick once more; a repeat that had
     // arrived is dropped, never counted as received twice.
+    assert!(s.plant_repeats_dropped <= servo_kills, "{s:?}");
+    let (Some(before), Some(after)) = (&c.steady_before_first_fault, &c.steady_after_last_fault)
+    else {
+        panic!("no steady footprints: {c:?}");
+    };
+    assert!(after.stale_files.is_empty(), "{after:?}");
+    assert_eq!(before.shm_files, after.shm_files);
+    let grew = |a: u64, b: u64| a as f64 - b as f64;
     assert!(
-        s["plant_repeats_dropped"].as_u64().unwrap() <= servo_kills,
-        "{s}"
+        grew(
+            after.supervisor_rss_kib.anon,
+            before.supervisor_rss_kib.anon
+        ) < 8192.0,
+        "{c:?}"
     );
-    let (before, after) = (
-        &c["steady_before_first_fault"],
-        &c["steady_after_last_fault"],
+    assert!(
+        grew(after.boards_rss_kib.anon, before.boards_rss_kib.anon).abs() < 8192.0,
+        "{c:?}"
     );
-    assert!(before.is_object() && after.is_object(), "{c}");
-    assert_eq!(after["stale_files"].as_array().map(Vec::len), Some(0));
-    assert_eq!(before["shm_files"], after["shm_files"]);
-    let grew = |k: &str, who: &str| f(&after[who][k]) - f(&before[who][k]);
-    assert!(grew("anon", "supervisor_rss_kib") < 8192.0, "{c}");
-    assert!(grew("anon", "boards_rss_kib").abs() < 8192.0, "{c}");
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
 }
 

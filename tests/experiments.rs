@@ -9,7 +9,10 @@ fn assert_passed<S>(name: &str, out: &experiments::Outcome<S>) {
         assert!(
             c.pass,
             "{name}: check '{}' failed: {} {} {}",
-            c.name, c.value, c.relation, c.limit
+            c.name,
+            c.value,
+            c.relation.symbol(),
+            c.limit
         );
     }
 }

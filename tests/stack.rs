@@ -5,6 +5,7 @@
 //!
 //! Stack tests run one at a time (a lock) with their own prefixes; none asserts a run time.
 
+use afs_shared::msg::ProcessState;
 use serde_json::Value;
 use std::path::Path;
 use std::process::Command;
@@ -26,34 +27,29 @@ fn surface_tracking_across_processes_agrees_with_the_lockstep() {
         .args(["--json", "--quiet", "--prefix", &p])
         .output()
         .unwrap();
-    let r = json_of(&out);
+    let r = run_report(&out);
     assert!(
         out.status.success(),
         "afs run failed: {}\n{}",
         String::from_utf8_lossy(&out.stderr),
-        serde_json::to_string_pretty(&r["checks"]).unwrap()
+        failed(&r)
     );
-    assert_eq!(r["passed"], true);
-    assert_eq!(r["finished"], true);
-    assert_eq!(r["agreement"]["agrees"], true, "{}", r["agreement"]);
-    assert_eq!(r["stack"]["ticks"].as_u64(), Some(100_000));
-    assert_eq!(r["samples"]["plant_lost"].as_u64(), Some(0));
-    assert_eq!(r["samples"]["reordered"].as_u64(), Some(0));
-    let l = &r["loop"];
-    for k in ["p50", "p99", "p99_9", "max"] {
-        assert!(l["wake_jitter_us"][k].as_f64().is_some(), "wake jitter {k}");
+    assert!(r.passed && r.finished);
+    assert!(r.agreement.agrees, "{:#?}", r.agreement);
+    assert_eq!(r.stack.ticks, 100_000);
+    assert_eq!(r.samples.plant_lost, 0);
+    assert_eq!(r.samples.reordered, 0);
+    let l = r.loop_stats.expect("the servo's loop statistics");
+    let w = l.wake_jitter_us;
+    for q in [w.p50, w.p99, w.p99_9, w.max] {
+        assert!(q.is_finite() && q >= 0.0, "wake jitter {w:?}");
     }
-    for k in ["p50", "p99", "p99_9"] {
-        let age = l["force_age_us"][k].as_f64().unwrap();
-        assert!(age > 0.0 && age < 2000.0, "force age {k} = {age} µs");
+    let a = l.force_age_us;
+    for age in [a.p50, a.p99, a.p99_9] {
+        assert!(age > 0.0 && age < 2000.0, "force age {a:?} µs");
     }
-    assert!(l["misses"].as_u64().is_some());
-    assert!(
-        r["stack"]["tracking"]["tangent_error_rms_deg"]
-            .as_f64()
-            .unwrap()
-            < 1.0
-    );
+    assert_eq!(l.ticks, 100_000);
+    assert!(r.stack.tracking.tangent_error_rms_deg < 1.0);
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
 }
 
@@ -79,19 +75,14 @@ fn a_running_stack_serves_clients_and_keeps_its_prefix() {
         ],
     );
     let status = wait_running(&p, Duration::from_secs(20));
-    let names: Vec<&str> = status["processes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x["name"].as_str().unwrap())
-        .collect();
+    let processes = status.processes.expect("the supervisor's status");
+    let names: Vec<&str> = processes.iter().map(|x| x.name.as_str()).collect();
     assert_eq!(names, ["servo", "sensor", "estimator"]);
     assert!(
-        status["processes"]
-            .as_array()
-            .unwrap()
+        processes
             .iter()
-            .all(|x| x["state"] == "running")
+            .all(|x| x.state == Some(ProcessState::Running)),
+        "{processes:?}"
     );
 
     // A client in another language.
@@ -136,31 +127,21 @@ fn a_running_stack_serves_clients_and_keeps_its_prefix() {
         .args(["--json", "--quiet", "--prefix", &q])
         .output()
         .unwrap();
-    let o = json_of(&other);
-    assert_eq!(
-        o["finished"],
-        true,
-        "{}",
-        String::from_utf8_lossy(&other.stderr)
-    );
+    let o = run_report(&other);
+    assert!(o.finished, "{}", String::from_utf8_lossy(&other.stderr));
     assert!(leftovers(&q).is_empty());
 
     // Two stacks, a Python client and `afs status` at once are more than this 2-core machine
     // holds at 10 kHz: the servo may see stale force data and go safe for a while, which moves
     // the figures away from the lockstep's; the run itself must complete and clean up.
     let out = finish(run.take(), "afs run");
-    let r = json_of(&out);
-    assert_eq!(
-        r["finished"],
-        true,
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert_eq!(r["stack"]["ticks"].as_u64(), Some(65_000));
+    let r = run_report(&out);
+    assert!(r.finished, "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(r.stack.ticks, 65_000);
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
-    let rs = &r["record"];
-    assert_eq!(rs["dropped"], 0);
-    let plant = rs["messages"]["/plant"].as_u64().unwrap();
+    let rs = r.record.expect("the recording's summary");
+    assert_eq!(rs.dropped, 0);
+    let plant = rs.messages["/plant"];
     assert!(plant >= 65_000, "{plant} plant samples recorded");
 
     // The recording plots and exports.
@@ -196,10 +177,7 @@ fn a_running_stack_serves_clients_and_keeps_its_prefix() {
     let mut lines = servo_csv.lines();
     let head = lines.next().unwrap();
     assert!(head.contains("normal_force_n") && head.contains("set_point_m[1]"));
-    assert_eq!(
-        lines.count() as u64,
-        rs["messages"]["/servo"].as_u64().unwrap()
-    );
+    assert_eq!(lines.count() as u64, rs.messages["/servo"]);
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -217,16 +195,16 @@ fn ctrl_c_stops_the_stack_and_cleans_up() {
         libc::kill(run.id() as i32, libc::SIGINT);
     }
     let out = finish(run.take(), "afs run");
-    let r = json_of(&out);
-    assert_eq!(r["interrupted"], true);
+    let r = run_report(&out);
+    assert!(r.interrupted);
     assert_eq!(
         out.status.code(),
         Some(1),
         "an interrupted scenario is not a pass"
     );
-    assert!(r["stack"]["ticks"].as_u64().unwrap() > 1000);
+    assert!(r.stack.ticks > 1000);
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
-    assert_eq!(r["cleanup"]["left"].as_array().map(Vec::len), Some(0));
+    assert!(r.cleanup.left.is_empty(), "{:?}", r.cleanup.left);
 }
 
 /// Bad input gets one clear line and exit status 2, never a panic or a hang.
@@ -505,40 +483,28 @@ fn killed_boards_are_restarted_and_the_world_resumes() {
         std::thread::sleep(Duration::from_secs(1));
     }
     let out = finish(run.take(), "afs run");
-    let r = json_of(&out);
+    let r = run_report(&out);
     assert!(
         out.status.success(),
         "{}\n{}",
         String::from_utf8_lossy(&out.stderr),
-        serde_json::to_string_pretty(&r["checks"]).unwrap()
+        failed(&r)
     );
-    let restarts = |name: &str| {
-        r["processes"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|q| q["name"] == name)
-            .unwrap()["restarts"]
-            .as_u64()
-            .unwrap()
-    };
-    assert_eq!(restarts("sensor"), 1);
-    assert_eq!(restarts("servo"), 1);
+    assert_eq!(process(&r, "sensor").restarts, 1);
+    assert_eq!(process(&r, "servo").restarts, 1);
     // Every world tick once (plus the initial sample 0); a servo killed between publishing a
     // tick's world sample and its servo sample loses that one servo sample.
-    let s = &r["samples"];
-    assert_eq!(s["plant_received"].as_u64(), Some(120_001), "{s}");
-    assert_eq!(s["plant_lost"].as_u64(), Some(0), "{s}");
-    assert!(s["servo_lost"].as_u64().unwrap() <= 1, "{s}");
-    assert_eq!(r["samples"]["reordered"].as_u64(), Some(0));
+    let s = &r.samples;
+    assert_eq!(s.plant_received, 120_001, "{s:?}");
+    assert_eq!(s.plant_lost, 0, "{s:?}");
+    assert!(s.servo_lost <= 1, "{s:?}");
+    assert_eq!(s.reordered, 0);
     // The restarted servo resumed its controller too, and the reference restarted its servo
     // at the same tick: the agreement is one of the run's checks, and it held.
     assert!(
-        r["checks"].as_array().unwrap().iter().any(|c| c["name"]
-            == "figures within tolerance of the lockstep reference"
-            && c["pass"] == true),
-        "{}",
-        r["agreement"]
+        check(&r, "figures within tolerance of the lockstep reference").pass,
+        "{:#?}",
+        r.agreement
     );
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
 }

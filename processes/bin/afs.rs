@@ -21,6 +21,14 @@ macro_rules! say {
     }};
 }
 
+/// Prints a report's text form (which ends its own lines), ignoring a closed stdout.
+macro_rules! show {
+    ($report:expr) => {{
+        use std::io::Write as _;
+        let _ = write!(std::io::stdout().lock(), "{}", $report);
+    }};
+}
+
 /// Active force sensing (Ipri 1995): force-guided assembly with tuned dither.
 #[derive(Parser)]
 #[command(name = "afs", version, about, long_about = None)]
@@ -77,13 +85,13 @@ fn run_stack(a: RunArgs, chaos: Option<supervisor::ChaosOptions>) -> Result<Exit
         progress: !a.quiet,
         chaos,
     };
-    let outcome = supervisor::run(&opts, &stop)?;
+    let report = supervisor::run(&opts, &stop)?;
     if a.json {
-        say!("{}", serde_json::to_string_pretty(&outcome.report)?);
+        say!("{}", serde_json::to_string_pretty(&report)?);
     } else {
-        print_run(&outcome.report);
+        show!(report);
     }
-    Ok(if outcome.passed {
+    Ok(if report.passed {
         ExitCode::SUCCESS
     } else {
         ExitCode::from(1)
@@ -255,20 +263,19 @@ fn run() -> Result<ExitCode> {
             let mut reports = Vec::new();
             let mut all_passed = true;
             for n in names {
-                let (report, passed) = experiment::run(n, &opts, &out)?;
-                all_passed &= passed;
+                let report = experiment::run(n, &opts, &out)?;
+                all_passed &= report.passed;
                 if !json {
-                    print_human(&report);
+                    show!(report);
                 }
                 reports.push(report);
             }
             if json {
-                let v = if reports.len() == 1 {
-                    reports.pop().unwrap_or_default()
-                } else {
-                    serde_json::Value::Array(reports)
+                let text = match reports.as_slice() {
+                    [one] => serde_json::to_string_pretty(one)?,
+                    all => serde_json::to_string_pretty(all)?,
                 };
-                say!("{}", serde_json::to_string_pretty(&v)?);
+                say!("{text}");
             }
             Ok(if all_passed {
                 ExitCode::SUCCESS
@@ -300,11 +307,11 @@ fn run() -> Result<ExitCode> {
             )
         }
         Command::Status { prefix, json } => {
-            let v = supervisor::status(&prefix, std::time::Duration::from_secs(2))?;
+            let status = supervisor::status(&prefix, std::time::Duration::from_secs(2))?;
             if json {
-                say!("{}", serde_json::to_string_pretty(&v)?);
+                say!("{}", serde_json::to_string_pretty(&status)?);
             } else {
-                print_status(&v);
+                show!(status);
             }
             Ok(ExitCode::SUCCESS)
         }
@@ -335,13 +342,13 @@ fn run() -> Result<ExitCode> {
                 out,
                 prefix,
             };
-            let r = afs::tools::bench::run(&opts, &stop)?;
+            let report = afs::tools::bench::run(&opts, &stop)?;
             if json {
-                say!("{}", serde_json::to_string_pretty(&r)?);
+                say!("{}", serde_json::to_string_pretty(&report)?);
             } else {
-                print_bench(&r);
+                show!(report);
             }
-            Ok(if r["interrupted"] == true {
+            Ok(if report.interrupted {
                 ExitCode::from(1)
             } else {
                 ExitCode::SUCCESS
@@ -361,220 +368,5 @@ fn run() -> Result<ExitCode> {
             }
             Ok(ExitCode::SUCCESS)
         }
-    }
-}
-
-/// The `checks` of a report, one line each.
-fn print_checks(r: &serde_json::Value) {
-    let num = |v: &serde_json::Value| match v.as_f64() {
-        Some(x) if x.fract() == 0.0 && x.abs() < 1e15 => format!("{x:.0}"),
-        Some(x) => format!("{x:.4}"),
-        None => v.to_string(),
-    };
-    for c in r["checks"].as_array().into_iter().flatten() {
-        say!(
-            "  [{}] {}{}: {} {} {}",
-            if c["pass"] == true { "ok" } else { "FAIL" },
-            if c["kind"] == "target" {
-                "(target) "
-            } else {
-                ""
-            },
-            c["name"].as_str().unwrap_or(""),
-            num(&c["value"]),
-            c["relation"].as_str().unwrap_or(""),
-            num(&c["limit"]),
-        );
-    }
-}
-
-fn print_bench(r: &serde_json::Value) {
-    for part in ["hop", "loop", "stack"] {
-        let Some(series) = r[part]["series"].as_object() else {
-            continue;
-        };
-        say!("{part}:");
-        say!(
-            "  {:<28} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9}  {:>9}",
-            "series (µs)",
-            "p50",
-            "p90",
-            "p99",
-            "p99.9",
-            "p99.99",
-            "max",
-            "p50/floor"
-        );
-        for (name, v) in series {
-            let s = &v["summary_us"];
-            let f = |k: &str| s[k].as_f64().unwrap_or(f64::NAN);
-            say!(
-                "  {:<28} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2}  {:>9}",
-                name,
-                f("p50"),
-                f("p90"),
-                f("p99"),
-                f("p99_9"),
-                f("p99_99"),
-                f("max"),
-                v["ratio_to_floor"]["p50"]
-                    .as_f64()
-                    .map_or("-".to_string(), |x| format!("{x:.2}"))
-            );
-        }
-        if let Some(ts) = r[part]["targets"].as_array() {
-            for t in ts {
-                say!(
-                    "  target: {} = {:.3} {} {} → {}",
-                    t["name"].as_str().unwrap_or("?"),
-                    t["value"].as_f64().unwrap_or(f64::NAN),
-                    t["relation"].as_str().unwrap_or("?"),
-                    t["limit"],
-                    if t["met"] == true { "met" } else { "NOT met" }
-                );
-            }
-        }
-    }
-    say!(
-        "files in the --out directory; {:.1} s",
-        r["wall_s"].as_f64().unwrap_or(0.0)
-    );
-}
-
-fn print_human(r: &serde_json::Value) {
-    say!(
-        "{}: {} (plot {}, {:.1} s simulated in {:.2} s CPU)",
-        r["experiment"].as_str().unwrap_or("?"),
-        if r["passed"].as_bool() == Some(true) {
-            "PASS"
-        } else {
-            "FAIL"
-        },
-        r["plot"].as_str().unwrap_or("?"),
-        r["timing"]["simulated_s"].as_f64().unwrap_or(0.0),
-        r["timing"]["cpu_s"].as_f64().unwrap_or(0.0),
-    );
-    print_checks(r);
-}
-
-fn print_run(r: &serde_json::Value) {
-    let f = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
-    say!(
-        "{} on prefix '{}': {} ({:.1} s simulated in {:.1} s)",
-        r["scenario"].as_str().unwrap_or("?"),
-        r["prefix"].as_str().unwrap_or("?"),
-        if r["passed"].as_bool() == Some(true) {
-            "PASS"
-        } else {
-            "FAIL"
-        },
-        f(&r["stack"]["duration_s"]),
-        f(&r["wall_s"]),
-    );
-    let t = &r["stack"]["tracking"];
-    let rt = &r["reference"]["tracking"];
-    say!(
-        "  tangent error RMS {:.3}° (lockstep {:.3}°), force deviation RMS {:.3} (lockstep {:.3}), travelled {:.1} mm, estimates {}",
-        f(&t["tangent_error_rms_deg"]),
-        f(&rt["tangent_error_rms_deg"]),
-        f(&t["normal_deviation_rms"]),
-        f(&rt["normal_deviation_rms"]),
-        f(&t["travelled_m"]) * 1e3,
-        t["estimations"]["estimates"]
-    );
-    if let Some(fr) = r["stack"]["friction"].as_object() {
-        say!(
-            "  friction {:.3} N before tuning, {:.1} % of it at the end, Aω {:.1} mm/s",
-            fr["start_mean_n"].as_f64().unwrap_or(f64::NAN),
-            100.0 * fr["end_ratio"].as_f64().unwrap_or(f64::NAN),
-            1e3 * fr["settled_a_omega_m_per_s"].as_f64().unwrap_or(f64::NAN)
-        );
-    }
-    let l = &r["loop"];
-    if l.is_object() {
-        say!(
-            "  servo: {} ticks, {} misses; wake jitter p50/p99/p99.9/max {:.1}/{:.1}/{:.1}/{:.1} µs; force age p50/p99/p99.9 {:.0}/{:.0}/{:.0} µs; SCHED_FIFO {}",
-            l["ticks"],
-            l["misses"],
-            f(&l["wake_jitter_us"]["p50"]),
-            f(&l["wake_jitter_us"]["p99"]),
-            f(&l["wake_jitter_us"]["p99_9"]),
-            f(&l["wake_jitter_us"]["max"]),
-            f(&l["force_age_us"]["p50"]),
-            f(&l["force_age_us"]["p99"]),
-            f(&l["force_age_us"]["p99_9"]),
-            l["sched_fifo"]
-        );
-    }
-    if let Some(p) = r["processes"].as_array() {
-        for x in p {
-            say!(
-                "  {}: {} restarts{}",
-                x["name"].as_str().unwrap_or("?"),
-                x["restarts"],
-                if x["gave_up"].as_bool() == Some(true) {
-                    ", gave up"
-                } else {
-                    ""
-                }
-            );
-        }
-    }
-    if let Some(c) = r["chaos"].as_object() {
-        say!(
-            "  faults: {} of {} injected; back after a kill (max ms): servo {}, sensor {}, estimator {}; beyond the backoff at most {} ms",
-            c["injected"],
-            c["planned"],
-            c["back_after_kill"]["servo"]["max_ms"],
-            c["back_after_kill"]["sensor"]["max_ms"],
-            c["back_after_kill"]["estimator"]["max_ms"],
-            c["back_beyond_backoff_ms_max"],
-        );
-    }
-    let fl = &r["faults"];
-    if fl.is_object() {
-        say!(
-            "  safe state: {} entries, worst {:.2} ms after the last good force sample; largest normal force {:.2} N ({:.2}× preload)",
-            fl["safe_entries"],
-            f(&fl["safe_after_last_good_ms_max"]),
-            f(&fl["normal_force_max_n"]),
-            f(&fl["normal_force_max_over_preload"]),
-        );
-    }
-    print_checks(r);
-}
-
-fn print_status(v: &serde_json::Value) {
-    say!("stack '{}'", v["prefix"].as_str().unwrap_or("?"));
-    if let Some(s) = v["supervisor"].as_object() {
-        say!(
-            "  supervisor pid {}: {} at {:.1}/{:.1} s",
-            s["pid"],
-            s["scenario"].as_str().unwrap_or("?"),
-            s["elapsed_s"].as_f64().unwrap_or(0.0),
-            s["duration_s"].as_f64().unwrap_or(0.0)
-        );
-    }
-    if let Some(ps) = v["processes"].as_array() {
-        for p in ps {
-            say!(
-                "  {:<10} pid {:<7} {:<10} restarts {}",
-                p["name"].as_str().unwrap_or("?"),
-                p["pid"],
-                p["state"].as_str().unwrap_or("?"),
-                p["restarts"]
-            );
-        }
-    }
-    let l = &v["loop"];
-    if l.is_object() {
-        say!(
-            "  servo loop: {} ticks, {} misses, wake jitter p99 {:.1} µs, force age p99 {:.0} µs, safe entries {}",
-            l["ticks"],
-            l["misses"],
-            l["wake_jitter_us"]["p99"].as_f64().unwrap_or(f64::NAN),
-            l["force_age_us"]["p99"].as_f64().unwrap_or(f64::NAN),
-            l["safe_entries"]
-        );
     }
 }

@@ -17,7 +17,7 @@ use afs_shared::msg::{
 };
 use afs_shared::multicontact::estimate_rotation_centre;
 use afs_shared::tangent;
-use anyhow::Result;
+use anyhow::{Context, Result};
 use iceoryx2::port::update_connections::UpdateConnections;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
@@ -42,20 +42,20 @@ pub fn run(prefix: &str, mut startup: Startup, stop: &AtomicBool) -> Result<Esti
     let tangent_server = ipc::tangent(&node)?
         .server_builder()
         .create()
-        .map_err(|e| anyhow::anyhow!("tangent server: {e:?}"))?;
+        .context("tangent server")?;
     let rotation_server = ipc::rotation(&node)?
         .server_builder()
         .create()
-        .map_err(|e| anyhow::anyhow!("rotation server: {e:?}"))?;
+        .context("rotation server")?;
     let friction_pub = ipc::friction(&node)?
         .publisher_builder()
         .create()
-        .map_err(|e| anyhow::anyhow!("friction publisher: {e:?}"))?;
+        .context("friction publisher")?;
     let servo_sub = ipc::servo(&node)?
         .subscriber_builder()
         .buffer_size(ipc::TICK_BUFFER)
         .create()
-        .map_err(|e| anyhow::anyhow!("servo subscriber: {e:?}"))?;
+        .context("servo subscriber")?;
     startup.open(&node)?;
     startup.report.ports_ns = Startup::now();
     // It serves from here on.

@@ -121,7 +121,7 @@ impl Startup {
             ipc::startup(node)?
                 .publisher_builder()
                 .create()
-                .map_err(|e| anyhow::anyhow!("start-up publisher: {e:?}"))?,
+                .context("start-up publisher")?,
         );
         Ok(())
     }

@@ -12,7 +12,7 @@ use crate::rt;
 use afs_shared::msg::{self, Board, PlantSample, WrenchFlags, WrenchSample};
 use afs_shared::sensor::SensorModel;
 use afs_shared::sensor::SensorParams;
-use anyhow::Result;
+use anyhow::{Context, Result};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 /// How the sensor runs.
@@ -51,12 +51,12 @@ pub fn run(args: &SensorArgs, stop: &AtomicBool) -> Result<SensorSummary> {
         .subscriber_builder()
         .buffer_size(64)
         .create()
-        .map_err(|e| anyhow::anyhow!("plant subscriber: {e:?}"))?;
+        .context("plant subscriber")?;
     let publisher = ipc::wrench(&node)?
         .publisher_builder()
         .backpressure_strategy(ipc::BACKPRESSURE)
         .create()
-        .map_err(|e| anyhow::anyhow!("wrench publisher: {e:?}"))?;
+        .context("wrench publisher")?;
     startup.open(&node)?;
     startup.report.ports_ns = Startup::now();
     let mut model = SensorModel::new(args.params, args.seed);

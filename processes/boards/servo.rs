@@ -265,32 +265,32 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
         .publisher_builder()
         .backpressure_strategy(ipc::BACKPRESSURE)
         .create()
-        .map_err(|e| anyhow::anyhow!("plant publisher: {e:?}"))?;
+        .context("plant publisher")?;
     let servo_pub = ipc::servo(&node)?
         .publisher_builder()
         .backpressure_strategy(ipc::BACKPRESSURE)
         .create()
-        .map_err(|e| anyhow::anyhow!("servo publisher: {e:?}"))?;
+        .context("servo publisher")?;
     let stats_pub = ipc::loop_stats(&node)?
         .publisher_builder()
         .create()
-        .map_err(|e| anyhow::anyhow!("loop-stats publisher: {e:?}"))?;
+        .context("loop-stats publisher")?;
     let wrench_sub = ipc::wrench(&node)?
         .subscriber_builder()
         .buffer_size(256)
         .create()
-        .map_err(|e| anyhow::anyhow!("wrench subscriber: {e:?}"))?;
+        .context("wrench subscriber")?;
     let client = ipc::tangent(&node)?
         .client_builder()
         .initial_max_slice_len(ipc::MAX_PROBE_SAMPLES)
         .allocation_strategy(AllocationStrategy::Static)
         .create()
-        .map_err(|e| anyhow::anyhow!("tangent client: {e:?}"))?;
+        .context("tangent client")?;
     let command_sub = ipc::command(&node)?
         .subscriber_builder()
         .buffer_size(16)
         .create()
-        .map_err(|e| anyhow::anyhow!("command subscriber: {e:?}"))?;
+        .context("command subscriber")?;
     let world = ipc::open_world(&node);
     if world.is_none() {
         eprintln!(
@@ -298,11 +298,7 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
         );
     }
     let world_writer = match &world {
-        Some(w) => Some(
-            w.writer_builder()
-                .create()
-                .map_err(|e| anyhow::anyhow!("world writer: {e:?}"))?,
-        ),
+        Some(w) => Some(w.writer_builder().create().context("world writer")?),
         None => None,
     };
     let world_entry = match &world_writer {
@@ -328,16 +324,13 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
     if args.resume
         && let Some(w) = &world
     {
-        let reader = w
-            .reader_builder()
-            .create()
-            .map_err(|e| anyhow::anyhow!("world reader: {e:?}"))?;
+        let reader = w.reader_builder().create().context("world reader")?;
         // The newest snapshot any earlier incarnation left.
         let mut newest: Option<WorldSnapshot> = None;
         for k in 0..ipc::WORLD_SLOTS {
             let s = *reader
                 .entry::<WorldSnapshot>(&k)
-                .map_err(|e| anyhow::anyhow!("world entry {k}: {e:?}"))?
+                .with_context(|| format!("world entry {k}"))?
                 .get();
             if s.version == msg::VERSION && newest.is_none_or(|n| s.seq > n.seq) {
                 newest = Some(s);

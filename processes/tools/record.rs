@@ -83,7 +83,7 @@ impl Rec {
 }
 
 /// What a recording holds.
-#[derive(Debug, Clone, Default, Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, serde::Deserialize)]
 pub struct RecordSummary {
     /// The file.
     pub path: PathBuf,

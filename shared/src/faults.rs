@@ -4,10 +4,10 @@
 
 use crate::error::UnknownName;
 pub use crate::msg::Board;
-use crate::msg::{PlantSample, ServoFlags, ServoSample};
+use crate::msg::{PlantSample, ServoFlags, ServoSample, WrenchFlags, WrenchSample};
 use rand_chacha::ChaCha8Rng;
 use rand_chacha::rand_core::{Rng, SeedableRng};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// What to inject.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -121,6 +121,67 @@ impl BadSample {
         BadSample::Backwards,
         BadSample::Future,
     ];
+}
+
+impl BadSample {
+    /// The bad sample of this kind, built from the newest genuine one `g` at `now_ns`
+    /// (monotonic); flagged as injected, which the gate ignores.
+    pub fn sample(self, g: &WrenchSample, now_ns: u64) -> WrenchSample {
+        let mut s = *g;
+        s.flags |= WrenchFlags::INJECTED;
+        s.publish_ns = now_ns;
+        match self {
+            BadSample::Nan => s.force_n[0] = f64::NAN,
+            BadSample::Infinite => s.torque_nm = f64::INFINITY,
+            BadSample::Absurd => s.force_n = [1e6, -1e6],
+            BadSample::Repeat => s.publish_ns = g.publish_ns,
+            BadSample::Backwards => {
+                s.epoch_ns = g.epoch_ns.saturating_sub(1);
+                s.seq = g.seq + 1000;
+            }
+            BadSample::Future => {
+                s.seq = g.seq + 1;
+                s.sample_ns = now_ns + 1_000_000_000;
+            }
+        }
+        s
+    }
+}
+
+/// Bad samples sent, by kind.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct BadCounts {
+    /// NaN.
+    pub nan: u64,
+    /// Infinite.
+    pub infinite: u64,
+    /// Beyond the rated range.
+    pub absurd: u64,
+    /// The newest genuine sample again.
+    pub repeat: u64,
+    /// An earlier epoch.
+    pub backwards: u64,
+    /// Timestamped in the future.
+    pub future: u64,
+}
+
+impl BadCounts {
+    /// One more of `kind`.
+    pub fn count(&mut self, kind: BadSample) {
+        *match kind {
+            BadSample::Nan => &mut self.nan,
+            BadSample::Infinite => &mut self.infinite,
+            BadSample::Absurd => &mut self.absurd,
+            BadSample::Repeat => &mut self.repeat,
+            BadSample::Backwards => &mut self.backwards,
+            BadSample::Future => &mut self.future,
+        } += 1;
+    }
+
+    /// All kinds.
+    pub fn total(&self) -> u64 {
+        self.nan + self.infinite + self.absurd + self.repeat + self.backwards + self.future
+    }
 }
 
 /// One planned fault.
@@ -328,7 +389,7 @@ pub const SERVO_STALL_NS: u64 = 500_000;
 pub const SERVO_RESTART_TICKS: u64 = 5_000;
 
 /// What [`FaultMonitor`] measured.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct FaultFigures {
     /// Times the servo entered its safe state after having had good force data.
     pub safe_entries: u64,
@@ -337,25 +398,33 @@ pub struct FaultFigures {
     pub safe_entries_servo_stalled: u64,
     /// Longest time from the last good force sample (its sampling instant) to the first servo
     /// tick in the safe state, over the entries where the servo ran on time (ms).
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub safe_after_last_good_ms_max: f64,
     /// Mean of that time over the same entries (ms).
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub safe_after_last_good_ms_mean: f64,
     /// Longest such time over every entry, those with the servo stalled included (ms).
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub safe_after_last_good_ms_max_all: f64,
     /// Largest true normal force after the settling time (N), outside the
     /// [`SERVO_RESTART_TICKS`] after each servo restart.
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub normal_force_max_n: f64,
     /// That over the preload.
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub normal_force_max_over_preload: f64,
     /// Simulated time of the largest normal force (s).
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub normal_force_max_at_s: f64,
     /// Largest true normal force in the [`SERVO_RESTART_TICKS`] after a servo restart (N): a
     /// restarted controller resumes the world but not its own state (force-loop integrator,
     /// a probe in progress), which is a transient of its own.
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub normal_force_max_after_servo_restart_n: f64,
     /// Servo ticks whose measured force (what the controller used) was NaN or infinite.
     pub controller_non_finite: u64,
     /// Largest |measured normal or tangential force| the controller used (N).
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub controller_force_max_abs_n: f64,
 }
 

@@ -5,6 +5,7 @@
 mod wire;
 
 pub mod arm;
+pub mod check;
 pub mod correlation;
 pub mod dither;
 pub mod error;
@@ -17,6 +18,7 @@ pub mod math;
 pub mod monitor;
 pub mod msg;
 pub mod multicontact;
+pub mod nan;
 pub mod plant;
 pub mod probe;
 pub mod scenario;

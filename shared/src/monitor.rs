@@ -5,7 +5,7 @@
 use crate::msg::{PlantSample, ServoFlags, ServoSample};
 use crate::servo::{EstimationCounters, ServoMode};
 use crate::window::SlidingWindow;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// What the monitor needs of one tick, from the two samples of that tick.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -80,30 +80,39 @@ pub struct TrackSample {
 }
 
 /// A tracking run's figures.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct TrackingRun {
     /// RMS of the tangent error while moving (deg).
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub tangent_error_rms_deg: f64,
     /// Largest |tangent error| while moving (deg).
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub tangent_error_max_deg: f64,
     /// Worst |F_N − preload| / preload after the first 0.5 s, of the true normal force
     /// averaged over one dither period: the regulated force, without the dither's ripple.
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub worst_normal_deviation: f64,
     /// Smallest and largest of that period-averaged force (N).
+    #[serde(deserialize_with = "crate::nan::pair_or_null")]
     pub normal_range_n: [f64; 2],
     /// When and where the worst period-averaged deviation happened (s, m).
+    #[serde(deserialize_with = "crate::nan::pair_or_null")]
     pub worst_normal_at: [f64; 2],
     /// RMS of the period-averaged |F_N − preload| / preload after 0.5 s.
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub normal_deviation_rms: f64,
     /// Smallest and largest instantaneous true normal force after 0.5 s, ripple included (N).
+    #[serde(deserialize_with = "crate::nan::pair_or_null")]
     pub instantaneous_normal_range_n: [f64; 2],
     /// Servo ticks without contact.
     pub ticks_without_contact: usize,
     /// Estimation counters.
     pub estimations: EstimationCounters,
     /// Distance travelled along the surface (m).
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub travelled_m: f64,
     /// Run time (s).
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub duration_s: f64,
     /// The estimator's answers (lockstep runs only).
     #[serde(skip)]

@@ -190,7 +190,7 @@ impl Default for TrackingParams {
 wire_code! {
     /// What the fast loop is doing (its wire code: 0 track, 1 stopping, 2 probing, 3 awaiting
     /// estimate, 4 resuming).
-    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
     #[serde(rename_all = "snake_case")]
     pub enum ServoMode {
         /// Hybrid control along the estimated tangent.
@@ -238,7 +238,7 @@ pub struct ProbeRequest<'a> {
 }
 
 /// Counters of the tangent estimation.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct EstimationCounters {
     /// Estimations started.
     pub started: usize,

@@ -3,7 +3,7 @@
 //! experiments and the friction-suppression scenario measure with it.
 
 use crate::sim::Lockstep;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// One recorded servo tick.
 #[derive(Debug, Clone, Copy, Default)]
@@ -65,25 +65,34 @@ pub(crate) fn run_recording(
 }
 
 /// Statistics over the whole dither periods inside [t0, t1).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct WindowSummary {
     /// Mean friction force resisting the motion (N), measured.
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub mean_force_n: f64,
     /// Its standard deviation (N).
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub std_force_n: f64,
     /// Mean tip velocity along the tangent (m/s): the ẋ_o the contact saw.
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub velocity_seen_m_per_s: f64,
     /// Dither velocity amplitude at the tip (m/s, lock-in): the Aω the contact saw.
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub a_omega_seen_m_per_s: f64,
     /// Mean commanded Aω (m/s).
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub a_omega_commanded_m_per_s: f64,
     /// Mean measured normal force (N).
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub mean_normal_n: f64,
     /// Mean of the true friction scale F_N/F_ref × roughness.
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub friction_scale: f64,
     /// Peak-to-peak of the friction force (N).
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub peak_to_peak_n: f64,
     /// Window start and end (s).
+    #[serde(deserialize_with = "crate::nan::pair_or_null")]
     pub window_s: [f64; 2],
 }
 

@@ -2,7 +2,8 @@
 //! board pids, and guards that kill children and remove shared memory when a test fails.
 #![allow(dead_code)]
 
-use serde_json::Value;
+use afs::supervisor::{RunReport, StatusReport};
+use serde::de::DeserializeOwned;
 use std::path::PathBuf;
 use std::process::{Child, Command, Output, Stdio};
 use std::sync::Mutex;
@@ -25,13 +26,45 @@ pub fn leftovers(prefix: &str) -> Vec<PathBuf> {
     afs::ipc::leftovers(prefix)
 }
 
-pub fn json_of(out: &Output) -> Value {
+/// The report a command printed with `--json`, read back as its type.
+pub fn report_of<T: DeserializeOwned>(out: &Output) -> T {
     serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
         panic!(
-            "stdout is not JSON ({e}); stderr:\n{}",
+            "stdout is not the report ({e}); stdout:\n{}\nstderr:\n{}",
+            String::from_utf8_lossy(&out.stdout),
             String::from_utf8_lossy(&out.stderr)
         )
     })
+}
+
+/// The report of `afs run --json` or `afs chaos --json`.
+pub fn run_report(out: &Output) -> RunReport {
+    report_of(out)
+}
+
+/// The named process's entry of a run report.
+pub fn process<'a>(r: &'a RunReport, name: &str) -> &'a afs::supervisor::ProcessReport {
+    r.processes
+        .iter()
+        .find(|p| p.name == name)
+        .unwrap_or_else(|| panic!("no process {name} in the report"))
+}
+
+/// The check named `name` of a run report.
+pub fn check<'a>(r: &'a RunReport, name: &str) -> &'a afs_shared::check::Check {
+    r.checks
+        .iter()
+        .find(|c| c.name == name)
+        .unwrap_or_else(|| panic!("no check '{name}' in {:#?}", r.checks))
+}
+
+/// The failed checks of a run report, one line each.
+pub fn failed(r: &RunReport) -> String {
+    r.checks
+        .iter()
+        .filter(|c| !c.pass)
+        .map(|c| c.line() + "\n")
+        .collect()
 }
 
 /// Asserts `out` is a clear refusal of `what`: exit status 2, `needle` in stderr, no panic.
@@ -59,7 +92,7 @@ pub fn start_run(prefix: &str, args: &[&str]) -> KillOnDrop {
 }
 
 /// Polls `afs status --json` (with a watchdog of `limit`) until `pick` finds what it wants.
-fn poll_status<T>(prefix: &str, limit: Duration, pick: impl Fn(&Value) -> Option<T>) -> T {
+fn poll_status<T>(prefix: &str, limit: Duration, pick: impl Fn(&StatusReport) -> Option<T>) -> T {
     let t0 = Instant::now();
     loop {
         let out = afs()
@@ -67,7 +100,7 @@ fn poll_status<T>(prefix: &str, limit: Duration, pick: impl Fn(&Value) -> Option
             .output()
             .unwrap();
         if out.status.success()
-            && let Some(x) = pick(&json_of(&out))
+            && let Some(x) = pick(&report_of(&out))
         {
             return x;
         }
@@ -81,9 +114,9 @@ fn poll_status<T>(prefix: &str, limit: Duration, pick: impl Fn(&Value) -> Option
 }
 
 /// Waits (with a watchdog) until `afs status` sees the stack's servo loop running.
-pub fn wait_running(prefix: &str, limit: Duration) -> Value {
+pub fn wait_running(prefix: &str, limit: Duration) -> StatusReport {
     poll_status(prefix, limit, |v| {
-        (v["loop"]["ticks"].as_u64().unwrap_or(0) > 1000).then(|| v.clone())
+        (v.loop_stats.is_some_and(|l| l.ticks > 1000)).then(|| v.clone())
     })
 }
 
@@ -140,8 +173,6 @@ impl Drop for CleanPrefix {
 /// The pid of the board `name` of a running stack, from `afs status`.
 pub fn board_pid(prefix: &str, name: &str) -> i32 {
     poll_status(prefix, Duration::from_secs(30), |v| {
-        v["nodes"].as_array()?.iter().find(|n| n["name"] == name)?["pid"]
-            .as_i64()
-            .map(|p| p as i32)
+        v.nodes.iter().find(|n| n.name == name).map(|n| n.pid)
     })
 }

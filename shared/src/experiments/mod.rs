@@ -25,6 +25,7 @@ pub use friction::*;
 pub use multicontact::*;
 pub use tracking::*;
 
+pub use crate::check::Check;
 use crate::sim::SimConfig;
 use crate::tuner::TunerConfig;
 use serde::Serialize;
@@ -97,42 +98,6 @@ pub struct Figure {
     pub panels: Vec<Panel>,
 }
 
-/// One acceptance criterion, measured.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Check {
-    /// What is checked.
-    pub name: String,
-    /// Measured value.
-    pub value: f64,
-    /// Limit.
-    pub limit: f64,
-    /// `"<="` or `">="`.
-    pub relation: &'static str,
-    /// Whether it holds.
-    pub pass: bool,
-}
-
-impl Check {
-    pub(crate) fn at_most(name: impl Into<String>, value: f64, limit: f64) -> Self {
-        Self {
-            name: name.into(),
-            value,
-            limit,
-            relation: "<=",
-            pass: value <= limit,
-        }
-    }
-    pub(crate) fn at_least(name: impl Into<String>, value: f64, limit: f64) -> Self {
-        Self {
-            name: name.into(),
-            value,
-            limit,
-            relation: ">=",
-            pass: value >= limit,
-        }
-    }
-}
-
 /// What an experiment produced.
 #[derive(Debug, Clone, Serialize)]
 pub struct Outcome<S> {
@@ -150,7 +115,7 @@ pub struct Outcome<S> {
 impl<S> Outcome<S> {
     /// True when every check passes.
     pub fn passed(&self) -> bool {
-        self.checks.iter().all(|c| c.pass)
+        crate::check::all_pass(&self.checks)
     }
 }
 

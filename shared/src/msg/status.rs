@@ -220,7 +220,7 @@ impl Board {
 
 wire_code! {
     /// [`ProcessStatus::state`].
-    #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
     #[serde(rename_all = "snake_case")]
     pub enum ProcessState {
         /// Being started.

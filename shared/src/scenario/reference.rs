@@ -5,7 +5,7 @@ use super::{DriverState, Scenario, ScenarioReport, TickRange};
 use crate::error::ScenarioError;
 use crate::msg::{PlantSample, ServoFlags, ServoSample};
 use crate::sim::Lockstep;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Runs `scenario` for `duration_s` (or to its end) in the lockstep simulation: the reference
 /// the real-time stack is compared with. Tick `seq` (from 1, as the servo numbers them) steps
@@ -77,22 +77,25 @@ pub fn run_lockstep_replay(
 }
 
 /// One compared figure.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Compared {
     /// Figure.
-    pub name: &'static str,
+    pub name: String,
     /// Real-time stack.
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub stack: f64,
     /// Lockstep reference.
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub reference: f64,
     /// Allowed |stack − reference|.
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub tolerance: f64,
     /// Within tolerance.
     pub agrees: bool,
 }
 
 /// How the real-time stack's figures compare with the lockstep reference's.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Agreement {
     /// Every figure within its tolerance.
     pub agrees: bool,
@@ -112,7 +115,7 @@ pub fn compare(stack: &ScenarioReport, reference: &ScenarioReport) -> Agreement 
     let mut add = |name: &'static str, a: f64, b: f64, tol: f64| {
         let agrees = (a - b).abs() <= tol || (a.is_nan() && b.is_nan());
         figures.push(Compared {
-            name,
+            name: name.into(),
             stack: a,
             reference: b,
             tolerance: tol,

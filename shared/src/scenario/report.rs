@@ -7,22 +7,27 @@ use crate::monitor::{MonitorTick, TrackingMonitor, TrackingRun};
 use crate::msg::{PlantSample, ServoFlags, ServoSample};
 use crate::servo::EstimationCounters;
 use crate::ticks::{Tick, WindowSummary, sliding_periods, window};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Friction-suppression figures (as `fig4.8`'s, for one tuner).
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct FrictionRun {
     /// Mean friction before tuning, 0.15 s to 0.5 s (N).
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub start_mean_n: f64,
     /// Mean over the last 3 whole dither periods (N).
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub end_mean_n: f64,
     /// end / start.
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub end_ratio: f64,
     /// First time after tuning started that the 3-period mean fell below 25 % of the start (s).
     pub time_to_quarter_s: Option<f64>,
     /// Worst |F_N − preload| / preload after 0.5 s, true force.
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub worst_normal_deviation: f64,
     /// Commanded Aω averaged over the last second (m/s).
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub settled_a_omega_m_per_s: f64,
     /// Statistics over the last second.
     pub last_second: WindowSummary,
@@ -201,7 +206,7 @@ impl ScenarioMonitor {
                 }
             });
         ScenarioReport {
-            scenario: self.kind.name(),
+            scenario: self.kind.name().into(),
             ticks: self.count,
             safe_ticks: self.safe_ticks,
             duration_s: tracking.duration_s,
@@ -212,15 +217,16 @@ impl ScenarioMonitor {
 }
 
 /// What a scenario run measured.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ScenarioReport {
     /// Scenario name.
-    pub scenario: &'static str,
+    pub scenario: String,
     /// Servo ticks seen.
     pub ticks: u64,
     /// Ticks in the safe state.
     pub safe_ticks: u64,
     /// Simulated time covered (s).
+    #[serde(deserialize_with = "crate::nan::or_null")]
     pub duration_s: f64,
     /// Tangent tracking and force regulation.
     pub tracking: TrackingRun,

@@ -1,0 +1,109 @@
+//! The supervisor's restart, backoff and stall policy, as pure functions of what happened to a
+//! board (the stack file's `restart`, `max_restarts`, `backoff_ms`, `stall_ms`).
+
+use super::stack::Restart;
+use afs_shared::msg::Board;
+use std::time::Duration;
+
+/// A process whose data flowed this long came up healthy: its death is not a crash loop, and
+/// its next restart waits the first backoff again.
+pub const HEALTHY_AFTER: Duration = Duration::from_millis(250);
+
+/// The backoff doubles with each death before a board came up healthy, up to this.
+pub const MAX_BACKOFF: Duration = Duration::from_secs(2);
+
+/// Whether a process that ended is started again: by its policy, while it has restarts left
+/// (`restarts` so far, `allowed` in all).
+pub fn restarts(policy: Restart, exited_ok: bool, restarts: u32, allowed: u32) -> bool {
+    let wanted = match policy {
+        Restart::Always => true,
+        Restart::OnFailure => !exited_ok,
+        Restart::Never => false,
+    };
+    wanted && restarts < allowed
+}
+
+/// The wait before a restart, and the crash-loop streak after it: a process that came up
+/// healthy restarts after `first_ms`; one that died before, after `first_ms` doubled once per
+/// death in a row, up to [`MAX_BACKOFF`].
+pub fn backoff(first_ms: u64, streak: u32, healthy: bool) -> (Duration, u32) {
+    let streak = if healthy { 0 } else { streak };
+    let wait = Duration::from_millis(first_ms.saturating_mul(1 << streak.min(6))).min(MAX_BACKOFF);
+    (wait, streak + 1)
+}
+
+/// How long a board may take before its data first flows: the servo waits for the sensor.
+pub fn start_grace(board: Option<Board>) -> Duration {
+    Duration::from_secs(if board == Some(Board::Servo) { 5 } else { 2 })
+}
+
+/// Whether a running board is alive but stalled: silent for longer than its `stall` limit
+/// (zero: never), counted from its newest data or the moment its data first flowed; before
+/// its data flows, only once its start-up grace is over. A board held on purpose (frozen by
+/// the fault injector) is not stalled.
+pub fn stalled(
+    stall: Duration,
+    silent_for: Duration,
+    flowing: bool,
+    up_for: Duration,
+    grace: Duration,
+    held: bool,
+) -> bool {
+    !stall.is_zero() && !held && (flowing || up_for > grace) && silent_for > stall
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The policies, and the restart budget.
+    #[test]
+    fn who_is_restarted() {
+        assert!(restarts(Restart::Always, true, 0, 5));
+        assert!(!restarts(Restart::OnFailure, true, 0, 5));
+        assert!(restarts(Restart::OnFailure, false, 4, 5));
+        assert!(!restarts(Restart::OnFailure, false, 5, 5));
+        assert!(!restarts(Restart::Never, false, 0, 5));
+    }
+
+    /// Deaths before coming up healthy double the wait (20, 40, 80 … ms, at most 2 s); a death
+    /// after coming up healthy waits the first backoff again, whatever came before.
+    #[test]
+    fn the_backoff_doubles_only_in_a_crash_loop() {
+        let mut streak = 0;
+        let mut waits = Vec::new();
+        for _ in 0..9 {
+            let (w, s) = backoff(20, streak, false);
+            waits.push(w.as_millis());
+            streak = s;
+        }
+        assert_eq!(waits, [20, 40, 80, 160, 320, 640, 1280, 1280, 1280]);
+        assert_eq!(backoff(500, 6, false).0, MAX_BACKOFF);
+        let (w, s) = backoff(20, streak, true);
+        assert_eq!((w.as_millis(), s), (20, 1));
+    }
+
+    /// Silent beyond the limit is a stall once the data has flowed, or once the start-up grace
+    /// is over; never while held, never without a limit.
+    #[test]
+    fn stalls_are_silence_beyond_the_limit() {
+        let ms = Duration::from_millis;
+        let grace = start_grace(Some(Board::Servo));
+        assert_eq!(grace, Duration::from_secs(5));
+        assert_eq!(start_grace(Some(Board::Sensor)), Duration::from_secs(2));
+        assert!(stalled(ms(100), ms(101), true, ms(300), grace, false));
+        assert!(!stalled(ms(100), ms(99), true, ms(300), grace, false));
+        assert!(!stalled(ms(100), ms(101), true, ms(300), grace, true));
+        assert!(!stalled(
+            Duration::ZERO,
+            ms(9_999),
+            true,
+            ms(300),
+            grace,
+            false
+        ));
+        // Starting: only after the grace.
+        assert!(!stalled(ms(100), ms(4_000), false, ms(4_000), grace, false));
+        assert!(stalled(ms(100), ms(5_100), false, ms(5_100), grace, false));
+    }
+}

@@ -1,0 +1,243 @@
+//! The stack file (`examples/stack.toml`): the process graph `afs run` launches, with each
+//! board's restart policy, and the command line's overrides of it.
+
+use crate::ipc;
+use afs_shared::faults::FaultKind;
+use afs_shared::msg::{self, Board};
+use afs_shared::scenario;
+use afs_shared::sim::SimConfig;
+use anyhow::{Context, Result, bail};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// The built-in stack file.
+pub const DEFAULT_STACK: &str = include_str!("../../examples/stack.toml");
+
+/// When to restart a process that ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Restart {
+    /// Whatever the exit.
+    Always,
+    /// Unless it exited with status 0.
+    OnFailure,
+    /// Never.
+    Never,
+}
+
+fn default_restarts() -> u32 {
+    5
+}
+fn default_backoff() -> u64 {
+    50
+}
+fn default_restart() -> Restart {
+    Restart::OnFailure
+}
+
+/// One process of the graph.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProcessSpec {
+    /// Name (servo, sensor and estimator have their roles; others are just supervised).
+    pub name: String,
+    /// Executable: a path, or a name looked up next to the `afs` executable.
+    pub binary: String,
+    /// Extra arguments.
+    #[serde(default)]
+    pub args: Vec<String>,
+    /// CPU to pin to.
+    #[serde(default)]
+    pub cpu: Option<usize>,
+    /// SCHED_FIFO priority (0: normal).
+    #[serde(default)]
+    pub priority: u8,
+    /// Restart policy.
+    #[serde(default = "default_restart")]
+    pub restart: Restart,
+    /// Most restarts before giving up.
+    #[serde(default = "default_restarts")]
+    pub max_restarts: u32,
+    /// First restart delay (ms), doubling up to 2 s.
+    #[serde(default = "default_backoff")]
+    pub backoff_ms: u64,
+    /// Alive but silent this long (ms) → killed and restarted (0: never).
+    #[serde(default)]
+    pub stall_ms: u64,
+}
+
+impl ProcessSpec {
+    /// The board this process is (None: another supervised process).
+    pub fn board(&self) -> Option<Board> {
+        Board::from_name(&self.name)
+    }
+}
+
+/// A stack file.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct StackFile {
+    /// Stack prefix.
+    pub prefix: String,
+    /// Scenario.
+    pub scenario: String,
+    /// Simulated seconds (0: the scenario's own length).
+    pub duration_s: f64,
+    /// Noise seed.
+    pub seed: u64,
+    /// SimConfig overrides.
+    #[serde(default)]
+    pub sim: Option<toml::Table>,
+    /// The processes.
+    pub process: Vec<ProcessSpec>,
+}
+
+impl StackFile {
+    /// Parses and checks a stack file's text (`origin` names it in errors).
+    pub fn parse(text: &str, origin: &str) -> Result<Self> {
+        let s: StackFile =
+            toml::from_str(text).with_context(|| format!("parsing stack file {origin}"))?;
+        s.check().with_context(|| format!("stack file {origin}"))?;
+        Ok(s)
+    }
+
+    /// Checks the stack file (after overrides).
+    pub fn check(&self) -> Result<()> {
+        ipc::check_prefix(&self.prefix)?;
+        scenario::ScenarioKind::from_name(&self.scenario)?;
+        if !(self.duration_s.is_finite() && (0.0..=86_400.0).contains(&self.duration_s)) {
+            bail!(
+                "duration_s = {} must be a number of seconds in [0, 86400] (0: the scenario's own length)",
+                self.duration_s
+            );
+        }
+        if self.process.is_empty() || self.process.len() > msg::MAX_PROCESSES {
+            bail!(
+                "needs 1 to {} [[process]] tables, found {}",
+                msg::MAX_PROCESSES,
+                self.process.len()
+            );
+        }
+        for (i, p) in self.process.iter().enumerate() {
+            if p.name.is_empty() || p.name.len() > 15 {
+                bail!("process {i}: name must be 1 to 15 characters");
+            }
+            if self.process[..i].iter().any(|q| q.name == p.name) {
+                bail!("process '{}' is listed twice", p.name);
+            }
+            if p.priority > 99 {
+                bail!(
+                    "process '{}': priority {} must be 0 to 99",
+                    p.name,
+                    p.priority
+                );
+            }
+        }
+        for role in [Board::Servo, Board::Sensor] {
+            if self.spec(role).is_none() {
+                bail!("the graph needs a process named '{}'", role.name());
+            }
+        }
+        Ok(())
+    }
+
+    /// The process of a board, if the graph has it.
+    pub fn spec(&self, board: Board) -> Option<&ProcessSpec> {
+        self.process.iter().find(|p| p.board() == Some(board))
+    }
+
+    /// The simulated set-up: defaults with the `[sim]` overrides.
+    pub fn sim_config(&self) -> Result<SimConfig> {
+        let mut cfg: SimConfig = match &self.sim {
+            Some(t) => t
+                .clone()
+                .try_into()
+                .context("the [sim] table (see `afs experiment --config`)")?,
+            None => SimConfig::default(),
+        };
+        cfg.seed = self.seed;
+        cfg.validate().context("the [sim] table")?;
+        Ok(cfg)
+    }
+}
+
+/// What `afs run` was asked.
+#[derive(Debug, Clone, Default)]
+pub struct RunOptions {
+    /// Stack file (None: the built-in one).
+    pub config: Option<PathBuf>,
+    /// Overrides.
+    pub scenario: Option<String>,
+    /// Override (s).
+    pub duration: Option<f64>,
+    /// Override.
+    pub prefix: Option<String>,
+    /// Override.
+    pub seed: Option<u64>,
+    /// Record every topic to this MCAP file.
+    pub record: Option<PathBuf>,
+    /// Print a progress line every second on stderr.
+    pub progress: bool,
+    /// Inject faults (`afs chaos`).
+    pub chaos: Option<ChaosOptions>,
+}
+
+/// What `afs chaos` injects.
+#[derive(Debug, Clone)]
+pub struct ChaosOptions {
+    /// Number of faults.
+    pub faults: usize,
+    /// Seed of the plan.
+    pub seed: u64,
+    /// Kinds to draw from (empty: every kind the scenario allows).
+    pub kinds: Vec<FaultKind>,
+    /// Take the kinds in turn instead of at random.
+    pub in_turn: bool,
+}
+
+/// Loads the stack file with the overrides applied.
+pub fn load_stack(opts: &RunOptions) -> Result<StackFile> {
+    let mut s = match &opts.config {
+        Some(p) => {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("reading stack file {}", p.display()))?;
+            StackFile::parse(&text, &p.display().to_string())?
+        }
+        None => StackFile::parse(DEFAULT_STACK, "(built-in)")?,
+    };
+    if let Some(x) = &opts.scenario {
+        s.scenario = x.clone();
+    }
+    if let Some(x) = opts.duration {
+        s.duration_s = x;
+    }
+    if let Some(x) = &opts.prefix {
+        s.prefix = x.clone();
+    }
+    if let Some(x) = opts.seed {
+        s.seed = x;
+    }
+    s.check()?;
+    Ok(s)
+}
+
+/// The executable of `name`: a path, or a name looked up next to the `afs` executable.
+pub fn resolve_binary(name: &str) -> Result<PathBuf> {
+    let p = Path::new(name);
+    if p.components().count() > 1 {
+        if p.is_file() {
+            return Ok(p.to_path_buf());
+        }
+        bail!("binary {} does not exist", p.display());
+    }
+    let exe = std::env::current_exe().context("locating the afs executable")?;
+    let dir = exe.parent().unwrap_or(Path::new("."));
+    let cand = dir.join(name);
+    if cand.is_file() {
+        return Ok(cand);
+    }
+    bail!(
+        "binary '{name}' not found next to {} (build it with `cargo build --release`)",
+        exe.display()
+    )
+}

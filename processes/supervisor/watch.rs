@@ -1,0 +1,562 @@
+//! The supervisor's loop (every 5 ms): the streams in, the fault injector, the children
+//! (reaped, restarted, killed when stalled), the status stream and the progress line.
+
+use super::FAULT_SETTLE_S;
+use super::child::{Ended, Launch, Proc};
+use super::footprint::Footprint;
+use super::join::Joiner;
+use crate::chaos::{Action, BoardView, Injector, ServoView};
+use crate::ipc::{self, Svc};
+use crate::rt;
+use crate::tools::record::{Rec, Recorder};
+use afs_shared::faults::FaultMonitor;
+use afs_shared::msg::{
+    self, Board, BoardStartup, FrictionReport, LoopStats, PlantSample, ProcessState, ProcessStatus,
+    ServoCommand, ServoSample, SupervisorStatus, WrenchFlags, WrenchSample, fixed_str,
+};
+use afs_shared::scenario::{Scenario, ScenarioMonitor};
+use afs_shared::servo::ServoMode;
+use anyhow::{Context, Result};
+use iceoryx2::node::Node;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::update_connections::UpdateConnections;
+use std::io::IsTerminal;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+/// The ports the supervisor reads and writes.
+pub struct Ports {
+    plant: Subscriber<Svc, PlantSample, ()>,
+    servo: Subscriber<Svc, ServoSample, ()>,
+    wrench: Subscriber<Svc, WrenchSample, ()>,
+    /// The servo loop's statistics.
+    pub stats: Subscriber<Svc, LoopStats, ()>,
+    friction: Subscriber<Svc, FrictionReport, ()>,
+    startup: Subscriber<Svc, BoardStartup, ()>,
+    status: Publisher<Svc, SupervisorStatus, ()>,
+    command: Publisher<Svc, ServoCommand, ()>,
+}
+
+impl Ports {
+    /// Opens them on the supervisor's node.
+    pub fn open(node: &Node<Svc>) -> Result<Self> {
+        Ok(Self {
+            plant: ipc::plant(node)?
+                .subscriber_builder()
+                .buffer_size(ipc::TICK_BUFFER)
+                .create()
+                .context("creating the plant subscriber")?,
+            servo: ipc::servo(node)?
+                .subscriber_builder()
+                .buffer_size(ipc::TICK_BUFFER)
+                .create()
+                .context("creating the servo subscriber")?,
+            wrench: ipc::wrench(node)?
+                .subscriber_builder()
+                .buffer_size(ipc::WRENCH_BUFFER)
+                .create()
+                .context("creating the wrench subscriber")?,
+            stats: ipc::loop_stats(node)?
+                .subscriber_builder()
+                .create()
+                .context("creating the loop-statistics subscriber")?,
+            friction: ipc::friction(node)?
+                .subscriber_builder()
+                .create()
+                .context("creating the friction subscriber")?,
+            startup: ipc::startup(node)?
+                .subscriber_builder()
+                .create()
+                .context("creating the start-up subscriber")?,
+            status: ipc::supervisor(node)?
+                .publisher_builder()
+                .create()
+                .context("creating the status publisher")?,
+            command: ipc::command(node)?
+                .publisher_builder()
+                .create()
+                .context("creating the command publisher")?,
+        })
+    }
+}
+
+/// A running stack under watch.
+pub struct Supervisor<'a> {
+    /// The processes of the graph.
+    pub procs: Vec<Proc>,
+    launch: Launch,
+    duration: f64,
+    /// The ports (the loop statistics are read once more after the stop).
+    pub ports: Ports,
+    recorder: Option<Recorder>,
+    /// The fault injector (`afs chaos`).
+    pub injector: Option<Injector>,
+    /// The scenario's figures from the samples.
+    pub monitor: ScenarioMonitor,
+    /// Safety figures.
+    pub faults: FaultMonitor,
+    /// The stack's footprint while steady before the first fault and after the last.
+    pub steady: [Option<Footprint>; 2],
+    /// The world and controller streams, joined.
+    pub joiner: Joiner,
+    /// The servo loop's newest statistics.
+    pub stats: Option<LoopStats>,
+    /// The estimator's newest friction report.
+    pub friction: Option<FrictionReport>,
+    /// The servo ran the scenario to its end.
+    pub finished: bool,
+    /// Stopped by a signal.
+    pub interrupted: bool,
+    /// Force samples received.
+    pub wrench_received: u64,
+    progress: bool,
+    t0: Instant,
+    /// When each board's data last arrived (servo: world samples; sensor: genuine force
+    /// samples; estimator: friction reports), for the stall policy.
+    last_data: [Instant; 3],
+    last_status: Instant,
+    last_progress: Instant,
+    status_seq: u64,
+    command_seq: u64,
+    last_time_s: f64,
+    servo_view: ServoView,
+    /// The first tick of a restarted servo (None until its first sample arrives).
+    servo_resumes_at: Option<u64>,
+    genuine: Option<WrenchSample>,
+    scenario_name: &'a str,
+}
+
+impl<'a> Supervisor<'a> {
+    /// A supervisor of `procs` (not started yet) running `scenario` for `duration` simulated
+    /// seconds, without recording, faults or progress line (see the methods below).
+    pub fn new(
+        procs: Vec<Proc>,
+        launch: Launch,
+        scenario: &'a Scenario,
+        duration: f64,
+        ports: Ports,
+    ) -> Self {
+        let now = Instant::now();
+        Self {
+            procs,
+            launch,
+            duration,
+            ports,
+            recorder: None,
+            injector: None,
+            monitor: scenario.monitor(),
+            faults: FaultMonitor::new(scenario.cfg.servo.hybrid.preload_n, FAULT_SETTLE_S),
+            steady: [None, None],
+            joiner: Joiner::default(),
+            stats: None,
+            friction: None,
+            finished: false,
+            interrupted: false,
+            wrench_received: 0,
+            progress: false,
+            t0: now,
+            last_data: [now; 3],
+            last_status: now,
+            last_progress: now,
+            status_seq: 0,
+            command_seq: 0,
+            last_time_s: 0.0,
+            servo_view: ServoView::default(),
+            servo_resumes_at: None,
+            genuine: None,
+            scenario_name: scenario.kind.name(),
+        }
+    }
+
+    /// Records every topic with `recorder`.
+    pub fn recording(self, recorder: Option<Recorder>) -> Self {
+        Self { recorder, ..self }
+    }
+
+    /// Injects faults with `injector`.
+    pub fn injecting(self, injector: Option<Injector>) -> Self {
+        Self { injector, ..self }
+    }
+
+    /// Prints a progress line on stderr when `progress`.
+    pub fn with_progress(self, progress: bool) -> Self {
+        Self { progress, ..self }
+    }
+
+    fn proc_mut(&mut self, b: Board) -> Option<&mut Proc> {
+        self.procs.iter_mut().find(|p| p.board == Some(b))
+    }
+
+    /// Starts the graph and watches it until the scenario ends, `stop` is set, the servo
+    /// gives up, or the wall-clock limit passes.
+    pub fn run(&mut self, stop: &AtomicBool) -> Result<()> {
+        self.t0 = Instant::now();
+        // Servo first (it publishes the world the sensor samples), then the others.
+        for b in Board::ALL {
+            if let Some(p) = self.procs.iter_mut().find(|p| p.board == Some(b)) {
+                p.spawn(&self.launch, false)?;
+            }
+        }
+        for p in self
+            .procs
+            .iter_mut()
+            .filter(|p| p.state == ProcessState::Starting)
+        {
+            p.spawn(&self.launch, false)?;
+        }
+        let tty = std::io::stderr().is_terminal();
+        // The simulated duration plus generous start-up and restart slack.
+        let limit = Duration::from_secs_f64(self.duration * 1.5 + 30.0);
+        loop {
+            std::thread::sleep(Duration::from_millis(5));
+            if stop.load(Ordering::Relaxed) {
+                self.interrupted = true;
+                break;
+            }
+            self.poll_streams();
+            // The supervisor's own publishers send rarely (status) or on demand (commands):
+            // drop their connections to subscribers that died (a killed servo's) as soon as
+            // iceoryx2 has cleaned them; without a change this compares a counter.
+            let _ = self.ports.status.update_connections();
+            let _ = self.ports.command.update_connections();
+            self.inject();
+            if self.watch_children() {
+                self.finished = true;
+                break;
+            }
+            let servo_failed = self
+                .procs
+                .iter()
+                .any(|p| p.board == Some(Board::Servo) && p.state == ProcessState::Failed);
+            if servo_failed {
+                break;
+            }
+            if self.t0.elapsed() > limit {
+                eprintln!(
+                    "afs: the scenario did not end within {:.0} s of wall time; stopping",
+                    limit.as_secs_f64()
+                );
+                break;
+            }
+            self.publish_status();
+            self.print_progress(tty);
+        }
+        if self.progress && tty {
+            eprintln!();
+        }
+        self.drain();
+        Ok(())
+    }
+
+    /// Reads every stream: world and controller samples (joined, monitored, recorded), force
+    /// samples, start-up reports, loop statistics, friction reports.
+    fn poll_streams(&mut self) {
+        while let Ok(Some(s)) = self.ports.plant.receive() {
+            let p = *s.payload();
+            self.last_data[Board::Servo as usize] = Instant::now();
+            self.servo_sample_seen(&p);
+            if self.joiner.is_repeat(&p) {
+                continue;
+            }
+            self.last_time_s = p.time_s;
+            if let Some(r) = self.recorder.as_mut() {
+                r.push(Rec::Plant(p));
+            }
+            self.joiner.push_plant(p);
+        }
+        while let Ok(Some(s)) = self.ports.servo.receive() {
+            let v = *s.payload();
+            self.servo_view = ServoView {
+                mode: ServoMode::try_from(v.mode).ok(),
+                started: v.estimations_started,
+            };
+            if let Some(r) = self.recorder.as_mut() {
+                r.push(Rec::Servo(v));
+            }
+            self.joiner.push_servo(v);
+        }
+        self.pair();
+        while let Ok(Some(s)) = self.ports.wrench.receive() {
+            let w = *s.payload();
+            self.wrench_received += 1;
+            if !w.flags.contains(WrenchFlags::INJECTED) {
+                let now = Instant::now();
+                self.last_data[Board::Sensor as usize] = now;
+                let new_epoch = self.genuine.is_none_or(|g| w.epoch_ns != g.epoch_ns);
+                self.genuine = Some(w);
+                if new_epoch
+                    && let Some(sn) = self.proc_mut(Board::Sensor)
+                    && sn.state == ProcessState::Running
+                {
+                    sn.data_flowing(now, rt::monotonic_ns());
+                }
+            }
+            if let Some(r) = self.recorder.as_mut() {
+                r.push(Rec::Wrench(w));
+            }
+        }
+        while let Ok(Some(s)) = self.ports.startup.receive() {
+            let r = *s.payload();
+            if let Some(p) = self
+                .procs
+                .iter_mut()
+                .find(|p| p.state == ProcessState::Running && p.pid() == r.pid)
+            {
+                p.started_up(&r);
+                // The estimator has no stream of its own: it serves once its ports are open.
+                if p.board == Some(Board::Estimator) && p.data_since.is_none() {
+                    p.data_flowing(Instant::now(), rt::monotonic_ns());
+                }
+            }
+        }
+        while let Ok(Some(s)) = self.ports.stats.receive() {
+            self.stats = Some(*s.payload());
+            if let Some(r) = self.recorder.as_mut() {
+                r.push(Rec::Stats(*s.payload()));
+            }
+        }
+        while let Ok(Some(s)) = self.ports.friction.receive() {
+            self.last_data[Board::Estimator as usize] = Instant::now();
+            self.friction = Some(*s.payload());
+            if let Some(r) = self.recorder.as_mut() {
+                r.push(Rec::Friction(*s.payload()));
+            }
+        }
+    }
+
+    /// A world sample arrived: it may be a (restarted) servo's data starting to flow. A
+    /// restarted servo's first sample is its predecessor's last tick again (from the snapshot
+    /// it resumes): its own ticks, and the world going on, start at the next one.
+    fn servo_sample_seen(&mut self, p: &PlantSample) {
+        let now = Instant::now();
+        let Some(sv) = self
+            .procs
+            .iter_mut()
+            .find(|q| q.board == Some(Board::Servo))
+        else {
+            return;
+        };
+        if sv.data_since.is_some() || sv.state != ProcessState::Running {
+            return;
+        }
+        let flowing = sv.restarts == 0 || {
+            let first = *self.servo_resumes_at.get_or_insert_with(|| {
+                self.faults.servo_restarted_at(p.seq + 1);
+                self.monitor.servo_restarted_at(p.seq + 1);
+                p.seq + 1
+            });
+            p.seq >= first
+        };
+        if flowing {
+            sv.data_flowing(now, rt::monotonic_ns());
+        }
+    }
+
+    /// Feeds the ticks with both samples to the monitors.
+    fn pair(&mut self) {
+        let (monitor, faults) = (&mut self.monitor, &mut self.faults);
+        self.joiner.pairs(|p, s| {
+            monitor.push(p, s);
+            faults.push(p, s);
+        });
+    }
+
+    /// One step of the fault injector, and what it asks for.
+    fn inject(&mut self) {
+        let Some(inj) = self.injector.as_mut() else {
+            return;
+        };
+        let mut views = [BoardView::default(); 3];
+        for b in Board::ALL {
+            if let Some(p) = self.procs.iter().find(|p| p.board == Some(b)) {
+                views[b as usize] = p.view();
+            }
+        }
+        let all_up = views.iter().all(|v| {
+            v.pid != 0
+                && v.data_since
+                    .is_some_and(|t| t.elapsed() > Duration::from_millis(500))
+        });
+        if all_up && inj.idle() {
+            let slot = if inj.records().is_empty() {
+                Some(0)
+            } else if inj.done() {
+                Some(1)
+            } else {
+                None
+            };
+            if let Some(slot) = slot
+                && self.steady[slot].is_none()
+            {
+                self.steady[slot] = Some(Footprint::now(&self.launch.prefix, &self.procs, self.t0));
+            }
+        }
+        let actions = inj.step(
+            self.last_time_s,
+            self.servo_view,
+            &views,
+            self.genuine.as_ref(),
+        );
+        for a in actions {
+            match a {
+                Action::Signal(b, sig) => {
+                    if let Some(p) = self.proc_mut(b) {
+                        p.signal(sig);
+                    }
+                }
+                Action::Hold(b, h) => {
+                    if let Some(p) = self.proc_mut(b) {
+                        p.held = h;
+                    }
+                }
+                Action::AskProbe { started_before } => {
+                    self.command_seq += 1;
+                    let _ = self.ports.command.send_copy(ServoCommand {
+                        version: msg::VERSION,
+                        command: msg::Command::EstimateTangent.into(),
+                        seq: self.command_seq,
+                        publish_ns: rt::monotonic_ns(),
+                        started_before,
+                        reserved: 0,
+                    });
+                }
+            }
+        }
+    }
+
+    /// Reaps, restarts and stall-kills the children; true once the servo finished.
+    fn watch_children(&mut self) -> bool {
+        let now = Instant::now();
+        let at_s = self.t0.elapsed().as_secs_f64();
+        let prefix = self.launch.prefix.clone();
+        let mut servo_done = false;
+        for p in self.procs.iter_mut() {
+            if let Some(st) = p.try_reap() {
+                // Its node is dead: remove its stale resources before anything replaces it.
+                let ended = p.ended(st, now, at_s, rt::monotonic_ns(), || {
+                    let _ = ipc::census(&prefix, true);
+                });
+                servo_done |= ended == Ended::ServoFinished;
+                continue;
+            }
+            if let Some(b) = p.board {
+                p.kill_if_stalled(now, self.last_data[b as usize]);
+            }
+            if p.restart_due(now) {
+                if p.board == Some(Board::Servo) {
+                    self.servo_resumes_at = None;
+                }
+                p.restart(&self.launch);
+                // The new process gets its own start-up grace before stall checks.
+                if let Some(b) = p.board {
+                    self.last_data[b as usize] = Instant::now();
+                }
+            }
+        }
+        servo_done
+    }
+
+    /// Publishes (and records) the supervisor's status every 0.5 s.
+    fn publish_status(&mut self) {
+        if self.last_status.elapsed() < Duration::from_millis(500) {
+            return;
+        }
+        self.last_status = Instant::now();
+        self.status_seq += 1;
+        let mut st = SupervisorStatus {
+            version: msg::VERSION,
+            process_count: self.procs.len() as u32,
+            seq: self.status_seq,
+            publish_ns: rt::monotonic_ns(),
+            pid: std::process::id() as i32,
+            phase: msg::SupervisorPhase::Running.into(),
+            scenario: fixed_str(self.scenario_name),
+            elapsed_s: self.last_time_s,
+            duration_s: self.duration,
+            ..Default::default()
+        };
+        for (i, p) in self.procs.iter().enumerate().take(msg::MAX_PROCESSES) {
+            st.processes[i] = ProcessStatus {
+                name: fixed_str(&p.spec.name),
+                pid: p.pid(),
+                state: p.state.into(),
+                restarts: p.restarts,
+                last_exit: p.last_exit.unwrap_or(i32::MIN),
+            };
+        }
+        let _ = self.ports.status.send_copy(st);
+        if let Some(r) = self.recorder.as_mut() {
+            r.push(Rec::Status(st));
+        }
+    }
+
+    /// A progress line on stderr every second (rewritten in place on a terminal).
+    fn print_progress(&mut self, tty: bool) {
+        if !self.progress || self.last_progress.elapsed() < Duration::from_secs(1) {
+            return;
+        }
+        self.last_progress = Instant::now();
+        let r = self.monitor.report();
+        let restarts: u32 = self.procs.iter().map(|p| p.restarts).sum();
+        let (jit, age) = self.stats.as_ref().map_or((0.0, 0.0), |st| {
+            (
+                st.wake_latency.p99 as f64 / 1000.0,
+                st.force_age.p99 as f64 / 1000.0,
+            )
+        });
+        let line = format!(
+            "afs: {:6.1}/{:.0} s  travelled {:5.1} mm  tangent err RMS {:4.2}°  estimates {}  safe ticks {}  wake p99 {jit:5.1} µs  force age p99 {age:5.1} µs  restarts {restarts}",
+            self.last_time_s,
+            self.duration,
+            r.tracking.travelled_m * 1e3,
+            r.tracking.tangent_error_rms_deg,
+            r.tracking.estimations.estimates,
+            r.safe_ticks,
+        );
+        if tty {
+            eprint!("\r{line}\x1b[K");
+        } else {
+            eprintln!("{line}");
+        }
+    }
+
+    /// What is still in flight after the loop.
+    fn drain(&mut self) {
+        while let Ok(Some(s)) = self.ports.plant.receive() {
+            self.joiner.push_plant(*s.payload());
+        }
+        while let Ok(Some(s)) = self.ports.servo.receive() {
+            self.joiner.push_servo(*s.payload());
+        }
+        self.pair();
+        while let Ok(Some(s)) = self.ports.friction.receive() {
+            self.friction = Some(*s.payload());
+        }
+    }
+
+    /// Stops the graph in order: the servo first (it holds the world), then the estimator and
+    /// the sensor, then the rest. Reads the servo's last statistics. Returns the wall time the
+    /// run took (s).
+    pub fn shut_down(&mut self) -> f64 {
+        let wall_s = self.t0.elapsed().as_secs_f64();
+        for b in [Board::Servo, Board::Estimator, Board::Sensor] {
+            if let Some(p) = self.proc_mut(b) {
+                p.stop(Duration::from_secs(2));
+            }
+        }
+        for p in self.procs.iter_mut() {
+            p.stop(Duration::from_secs(2));
+        }
+        // The servo's last words.
+        while let Ok(Some(s)) = self.ports.stats.receive() {
+            self.stats = Some(*s.payload());
+        }
+        wall_s
+    }
+
+    /// Ends the recording, if any.
+    pub fn finish_recording(&mut self) -> Result<Option<crate::tools::record::RecordSummary>> {
+        self.recorder.take().map(|r| r.finish()).transpose()
+    }
+}

@@ -1,0 +1,435 @@
+//! The loop and stack parts: the servo's wake latency against a bare loop beside it, and the
+//! full graph's force age and wake latency without and with a CPU hog.
+
+use super::transport::pin_thread;
+use super::{BenchOptions, ConstFloor, PartReport, Series, finish_part};
+use crate::hist::{self, Summary};
+use crate::supervisor::{DEFAULT_STACK, RunReport, StackFile};
+use crate::{ipc, rt};
+use afs_shared::check::Check;
+use anyhow::{Context, Result, bail};
+use hdrhistogram::Histogram;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+/// The loop part's report.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct LoopPart {
+    /// The servo's CPU (and the bare loop's).
+    pub cpu: usize,
+    /// Their SCHED_FIFO priority.
+    pub priority: u8,
+    /// Tick period (µs).
+    pub period_us: f64,
+    /// Servo ticks that missed their period (none if the stack gave no loop statistics).
+    pub servo_misses: Option<u64>,
+    /// Series, targets, files.
+    #[serde(flatten)]
+    pub part: PartReport,
+}
+
+/// Sums over the stack runs of one kind.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+pub struct RunSums {
+    /// Stack runs.
+    pub stack_runs: u64,
+    /// A hog ran on the other core.
+    pub hog_running: bool,
+    /// Servo ticks that missed their period.
+    pub misses: u64,
+    /// Servo ticks.
+    pub ticks: u64,
+    /// Safe-state entries.
+    pub safe_entries: u64,
+    /// Ticks with stale force data.
+    pub stale_ticks: u64,
+    /// Every run passed its checks.
+    pub passed: bool,
+}
+
+/// The stack runs without and with the hog.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+pub struct StackRuns {
+    /// Without the hog.
+    pub without_hog: RunSums,
+    /// With it.
+    pub with_hog: RunSums,
+}
+
+/// The stack part's report.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct StackPart {
+    /// Scenario run.
+    pub scenario: String,
+    /// The hog's CPU.
+    pub hog_cpu: usize,
+    /// The floor of the force age (µs).
+    pub sensor_period_us: f64,
+    /// Run sums.
+    pub runs: StackRuns,
+    /// Series, targets, files.
+    #[serde(flatten)]
+    pub part: PartReport,
+}
+
+/// A stack run for the benchmark: `afs run` with the servo saving its histograms.
+struct StackRun {
+    report: RunReport,
+    wake: Histogram<u64>,
+    age: Histogram<u64>,
+}
+
+/// Runs a stack (`afs run` refuses a prefix in use) while `during` runs beside it; `during`
+/// is told through its flag when the stack has ended.
+fn run_stack<T: Send>(
+    prefix: &str,
+    duration_s: f64,
+    dir: &Path,
+    stop: &AtomicBool,
+    during: impl FnOnce(&AtomicBool) -> T + Send,
+) -> Result<(StackRun, T)> {
+    let mut stack = StackFile::parse(DEFAULT_STACK, "(built-in)")?;
+    stack.prefix = prefix.into();
+    stack.scenario = "surface-tracking".into();
+    stack.duration_s = duration_s;
+    let hist_dir = dir.join(format!("{prefix}-servo"));
+    let _ = std::fs::remove_dir_all(&hist_dir);
+    for p in stack.process.iter_mut().filter(|p| p.name == "servo") {
+        p.args
+            .extend(["--histograms".to_string(), hist_dir.display().to_string()]);
+    }
+    let file = dir.join(format!("{prefix}.toml"));
+    std::fs::write(
+        &file,
+        toml::to_string(&stack).context("writing the stack file")?,
+    )?;
+    let child = Command::new(std::env::current_exe().context("locating afs")?)
+        .args(["run", "--json", "--quiet", "--config"])
+        .arg(&file)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .context("starting afs run")?;
+    let running = AtomicBool::new(true);
+    let (out, beside) = std::thread::scope(|sc| {
+        let h = sc.spawn(|| during(&running));
+        let pid = child.id();
+        // Forward a Ctrl-C to the stack.
+        let running = &running;
+        let watcher = sc.spawn(move || {
+            while running.load(Ordering::Relaxed) {
+                if stop.load(Ordering::Relaxed) {
+                    // SAFETY: signalling our own child.
+                    unsafe {
+                        libc::kill(pid as i32, libc::SIGINT);
+                    }
+                    return;
+                }
+                std::thread::sleep(Duration::from_millis(50));
+            }
+        });
+        let out = child.wait_with_output();
+        running.store(false, Ordering::Relaxed);
+        let _ = watcher.join();
+        let beside = h.join();
+        (out, beside)
+    });
+    let out = out.context("waiting for afs run")?;
+    let beside = beside.map_err(|_| anyhow::anyhow!("the thread beside the stack panicked"))?;
+    let report: RunReport = serde_json::from_slice(&out.stdout).with_context(|| {
+        format!(
+            "afs run gave no report; its stderr:\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        )
+    })?;
+    let wake = hist::load(&hist_dir.join("wake.hdr"))
+        .context("the servo saved no histograms (did it run?)")?;
+    let age = hist::load(&hist_dir.join("force_age.hdr"))?;
+    let _ = std::fs::remove_dir_all(&hist_dir);
+    let _ = std::fs::remove_file(&file);
+    Ok((StackRun { report, wake, age }, beside))
+}
+
+/// The bare absolute-time loop at the servo's priority and core, half a period out of phase
+/// with the servo's ticks (read from its samples), while `running`.
+fn bare_loop(
+    prefix: &str,
+    cpu: usize,
+    priority: u8,
+    duration_s: f64,
+    running: &AtomicBool,
+) -> Result<Histogram<u64>> {
+    let mut h = hist::new()?;
+    // Join the stack once its servo is up (a node of ours before that would make `afs run`
+    // refuse the prefix as taken), then find the servo's tick phase from its samples.
+    let t0 = Instant::now();
+    loop {
+        if !running.load(Ordering::Relaxed) {
+            return Ok(h);
+        }
+        if ipc::census(prefix, false).is_ok_and(|c| c.alive.iter().any(|(n, _)| n == "servo")) {
+            break;
+        }
+        if t0.elapsed() > Duration::from_secs(30) {
+            bail!("the servo did not start within 30 s");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let node = ipc::node(prefix, "bench-loop")?;
+    let sub = ipc::servo(&node)?
+        .subscriber_builder()
+        .create()
+        .context("servo subscriber")?;
+    let period = 100_000u64;
+    let t0 = Instant::now();
+    let (phase, seq0, tick0) = loop {
+        if !running.load(Ordering::Relaxed) {
+            return Ok(h);
+        }
+        if let Some(s) = sub.receive().map_err(|e| anyhow::anyhow!("{e:?}"))?
+            && s.seq > 100
+        {
+            break (s.tick_ns % period, s.seq, s.tick_ns);
+        }
+        if t0.elapsed() > Duration::from_secs(30) {
+            bail!("the servo did not start within 30 s");
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    };
+    drop(sub);
+    drop(node);
+    let r = rt::setup(priority, true, Some(cpu));
+    for w in &r.warnings {
+        eprintln!("afs bench: warning: {w}");
+    }
+    let now = rt::monotonic_ns();
+    // Until 5 ms before the servo's last tick (its ticks are 100 µs of simulated and wall
+    // time): the servo's exit (unmapping its locked memory on this core) is not part of the
+    // comparison.
+    let end = (tick0 + ((duration_s * 1e9) as u64).saturating_sub(seq0 * period))
+        .saturating_sub(5_000_000);
+    let mut deadline = now - now % period + phase + period / 2 + period;
+    while running.load(Ordering::Relaxed) && deadline < end {
+        rt::sleep_until(deadline);
+        let late = rt::monotonic_ns().saturating_sub(deadline);
+        hist::record(&mut h, late);
+        deadline += period;
+        let now = rt::monotonic_ns();
+        if now > deadline + 100 * period {
+            deadline = now - now % period + phase + period / 2 + period;
+        }
+    }
+    Ok(h)
+}
+
+/// The built-in stack's servo CPU and priority.
+fn servo_spec() -> Result<(usize, u8)> {
+    let s = StackFile::parse(DEFAULT_STACK, "(built-in)")?;
+    let p = s
+        .process
+        .iter()
+        .find(|p| p.name == "servo")
+        .context("the built-in stack has no servo")?;
+    Ok((
+        p.cpu
+            .unwrap_or(1)
+            .min(rt::available_cpus().saturating_sub(1)),
+        p.priority,
+    ))
+}
+
+pub(super) fn jitter(opts: &BenchOptions, stop: &AtomicBool) -> Result<LoopPart> {
+    let prefix = format!("{}l", opts.prefix);
+    let dir = scratch(&prefix)?;
+    let (cpu, prio) = servo_spec()?;
+    let (run, bare) = run_stack(&prefix, opts.duration_s, &dir, stop, |running| {
+        bare_loop(&prefix, cpu, prio, opts.duration_s, running)
+    })?;
+    let _ = std::fs::remove_dir_all(&dir);
+    let bare = bare.context("the bare loop")?;
+    let series = vec![
+        Series {
+            name: "bare_loop_wake",
+            what: "bare clock_nanosleep loop, SCHED_FIFO, servo's core and priority (the floor)",
+            floor: None,
+            hist: bare,
+        },
+        Series {
+            name: "servo_wake",
+            what: "afs servo's wake latency (running surface-tracking with every board)",
+            floor: Some("bare_loop_wake"),
+            hist: run.wake,
+        },
+    ];
+    let servo = Summary::of(&series[1].hist);
+    let floor = Summary::of(&series[0].hist);
+    let targets =
+        vec![Check::at_most("servo wake p99 / bare loop p99", servo.p99 / floor.p99, 1.2).target()];
+    let part = finish_part(
+        "loop",
+        &series,
+        &[],
+        targets,
+        &opts.out,
+        "loop: wake latency, servo vs bare loop (same core, priority and time)",
+    )?;
+    Ok(LoopPart {
+        cpu,
+        priority: prio,
+        period_us: 100.0,
+        servo_misses: run.report.loop_stats.map(|l| l.misses),
+        part,
+    })
+}
+
+fn scratch(prefix: &str) -> Result<PathBuf> {
+    let dir = std::env::temp_dir().join(format!("afs-bench-{prefix}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    Ok(dir)
+}
+
+/// A busy loop on `cpu` at normal priority while `running`.
+fn hog(cpu: usize, running: &AtomicBool) {
+    pin_thread(cpu);
+    let mut x = 0u64;
+    while running.load(Ordering::Relaxed) {
+        for _ in 0..10_000 {
+            x = std::hint::black_box(x.wrapping_mul(6364136223846793005).wrapping_add(1));
+        }
+    }
+}
+
+/// Sums of the stack runs of one kind (without or with the hog).
+struct StackSums {
+    wake: Histogram<u64>,
+    age: Histogram<u64>,
+    runs: u64,
+    misses: u64,
+    ticks: u64,
+    safe_entries: u64,
+    stale_ticks: u64,
+    passed: bool,
+}
+
+pub(super) fn stack(opts: &BenchOptions, stop: &AtomicBool) -> Result<StackPart> {
+    let (cpu, _) = servo_spec()?;
+    let other = if cpu == 0 { 1 } else { 0 };
+    let can_hog = rt::available_cpus() > 1;
+    // Alternating halves (A B A B) so that a noisy stretch of the machine falls on both kinds.
+    let mut sums: Vec<StackSums> = (0..2)
+        .map(|_| {
+            Ok(StackSums {
+                wake: hist::new()?,
+                age: hist::new()?,
+                runs: 0,
+                misses: 0,
+                ticks: 0,
+                safe_entries: 0,
+                stale_ticks: 0,
+                passed: true,
+            })
+        })
+        .collect::<Result<_>>()?;
+    for (i, with_hog) in [false, true, false, true].into_iter().enumerate() {
+        if stop.load(Ordering::Relaxed) {
+            break;
+        }
+        let prefix = format!("{}s{i}", opts.prefix);
+        let dir = scratch(&prefix)?;
+        let (r, ()) = run_stack(&prefix, opts.duration_s / 2.0, &dir, stop, |running| {
+            if with_hog && can_hog {
+                hog(other, running);
+            }
+        })?;
+        let _ = std::fs::remove_dir_all(&dir);
+        let k = &mut sums[usize::from(with_hog)];
+        k.wake.add(&r.wake).context("adding histograms")?;
+        k.age.add(&r.age).context("adding histograms")?;
+        let l = r.report.loop_stats.unwrap_or_default();
+        k.runs += 1;
+        k.misses += l.misses;
+        k.ticks += l.ticks;
+        k.safe_entries += l.safe_entries;
+        k.stale_ticks += l.stale_ticks;
+        k.passed &= r.report.passed;
+    }
+    let sensor_period_us = 1e6 / afs_shared::sim::SimConfig::default().sensor.rate_hz;
+    let mut series = Vec::new();
+    let mut runs = Vec::new();
+    for (hogged, k) in sums.into_iter().enumerate() {
+        let hogged = hogged == 1;
+        let (wake, age) = if hogged {
+            ("servo_wake_hog", "force_age_hog")
+        } else {
+            ("servo_wake", "force_age")
+        };
+        runs.push(RunSums {
+            stack_runs: k.runs,
+            hog_running: hogged && can_hog,
+            misses: k.misses,
+            ticks: k.ticks,
+            safe_entries: k.safe_entries,
+            stale_ticks: k.stale_ticks,
+            passed: k.passed,
+        });
+        series.push(Series {
+            name: wake,
+            what: if hogged {
+                "servo wake latency, CPU hog on the other core"
+            } else {
+                "servo wake latency"
+            },
+            floor: if hogged { Some("servo_wake") } else { None },
+            hist: k.wake,
+        });
+        series.push(Series {
+            name: age,
+            what: if hogged {
+                "force data age at use, CPU hog on the other core"
+            } else {
+                "force data age at use (sensor sample to servo tick)"
+            },
+            floor: Some("sensor period"),
+            hist: k.age,
+        });
+    }
+    let consts = [ConstFloor {
+        name: "sensor period",
+        value_us: sensor_period_us,
+    }];
+    let mut targets = Vec::new();
+    if let Some(s) = series.iter().find(|s| s.name == "force_age") {
+        targets.push(
+            Check::at_most(
+                "force age p99 without hog (µs) ≤ sensor period + 20 µs",
+                Summary::of(&s.hist).p99,
+                sensor_period_us + 20.0,
+            )
+            .target(),
+        );
+    }
+    let part = finish_part(
+        "stack",
+        &series,
+        &consts,
+        targets,
+        &opts.out,
+        "stack: servo wake latency and force age at use, without and with a CPU hog",
+    )?;
+    let [without_hog, with_hog]: [RunSums; 2] = runs
+        .try_into()
+        .map_err(|_| anyhow::anyhow!("two kinds of stack run"))?;
+    Ok(StackPart {
+        scenario: "surface-tracking".into(),
+        hog_cpu: other,
+        sensor_period_us,
+        runs: StackRuns {
+            without_hog,
+            with_hog,
+        },
+        part,
+    })
+}
