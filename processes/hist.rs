@@ -70,60 +70,50 @@ pub fn write_hgrm(h: &Histogram<u64>, path: &Path) -> Result<()> {
         .with_context(|| format!("writing {}", path.display()))
 }
 
-/// The percentiles a report carries (µs).
-#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
-pub struct Summary {
-    /// Values recorded.
-    pub count: u64,
-    /// Median (µs).
+/// Percentiles of a latency distribution (µs): the servo's loop statistics, each benchmark
+/// series, and ratios of two such.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct QuantilesUs {
+    /// Median.
     #[serde(deserialize_with = "afs_shared::nan::or_null")]
     pub p50: f64,
-    /// 90th percentile (µs).
+    /// 90th percentile.
     #[serde(deserialize_with = "afs_shared::nan::or_null")]
     pub p90: f64,
-    /// 99th percentile (µs).
+    /// 99th percentile.
     #[serde(deserialize_with = "afs_shared::nan::or_null")]
     pub p99: f64,
-    /// 99.9th percentile (µs).
+    /// 99.9th percentile.
     #[serde(deserialize_with = "afs_shared::nan::or_null")]
     pub p99_9: f64,
-    /// 99.99th percentile (µs).
+    /// 99.99th percentile.
     #[serde(deserialize_with = "afs_shared::nan::or_null")]
     pub p99_99: f64,
-    /// Largest (µs).
+    /// Largest.
     #[serde(deserialize_with = "afs_shared::nan::or_null")]
     pub max: f64,
 }
 
-impl Summary {
-    /// The summary of `h` (all NaN when it is empty).
+impl QuantilesUs {
+    /// The percentiles of `h` (ns values; all NaN when it is empty).
     pub fn of(h: &Histogram<u64>) -> Self {
-        let q = |x: f64| {
-            if h.is_empty() {
-                f64::NAN
-            } else {
-                h.value_at_quantile(x) as f64 / 1e3
-            }
-        };
+        if h.is_empty() {
+            return Self::constant(f64::NAN);
+        }
+        let q = |x: f64| h.value_at_quantile(x) as f64 / 1e3;
         Self {
-            count: h.len(),
             p50: q(0.5),
             p90: q(0.9),
             p99: q(0.99),
             p99_9: q(0.999),
             p99_99: q(0.9999),
-            max: if h.is_empty() {
-                f64::NAN
-            } else {
-                h.max() as f64 / 1e3
-            },
+            max: h.max() as f64 / 1e3,
         }
     }
 
     /// A fixed value at every percentile (a floor such as a sampling period), µs.
     pub fn constant(value_us: f64) -> Self {
         Self {
-            count: 1,
             p50: value_us,
             p90: value_us,
             p99: value_us,
@@ -134,15 +124,48 @@ impl Summary {
     }
 
     /// Each percentile divided by the floor's.
-    pub fn ratio_to(&self, floor: &Summary) -> Summary {
-        Summary {
-            count: self.count,
+    pub fn ratio_to(&self, floor: &QuantilesUs) -> QuantilesUs {
+        QuantilesUs {
             p50: self.p50 / floor.p50,
             p90: self.p90 / floor.p90,
             p99: self.p99 / floor.p99,
             p99_9: self.p99_9 / floor.p99_9,
             p99_99: self.p99_99 / floor.p99_99,
             max: self.max / floor.max,
+        }
+    }
+}
+
+impl From<&afs_shared::msg::Quantiles> for QuantilesUs {
+    fn from(q: &afs_shared::msg::Quantiles) -> Self {
+        let us = |v: u64| v as f64 / 1000.0;
+        Self {
+            p50: us(q.p50),
+            p90: us(q.p90),
+            p99: us(q.p99),
+            p99_9: us(q.p999),
+            p99_99: us(q.p9999),
+            max: us(q.max),
+        }
+    }
+}
+
+/// A histogram's size and percentiles, as a benchmark series reports them.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// Values recorded.
+    pub count: u64,
+    /// Percentiles (µs).
+    #[serde(flatten)]
+    pub quantiles: QuantilesUs,
+}
+
+impl Summary {
+    /// The summary of `h` (percentiles NaN when it is empty).
+    pub fn of(h: &Histogram<u64>) -> Self {
+        Self {
+            count: h.len(),
+            quantiles: QuantilesUs::of(h),
         }
     }
 }
@@ -164,19 +187,30 @@ mod tests {
         save(&h, &p).unwrap();
         let back = load(&p).unwrap();
         assert_eq!(back, h);
-        let s = Summary::of(&back);
-        assert_eq!(s.count, 10_000);
+        let summary = Summary::of(&back);
+        assert_eq!(summary.count, 10_000);
+        let s = summary.quantiles;
         // 3 significant digits: within 0.1 %.
         assert!((s.p50 - 5000.0).abs() <= 5.0, "{}", s.p50);
         assert!((s.p99 - 9900.0).abs() <= 10.0, "{}", s.p99);
         assert!((s.max - 10_000.0).abs() <= 10.0, "{}", s.max);
         let r = s.ratio_to(&s);
         assert_eq!(r.p50, 1.0);
-        assert_eq!(s.ratio_to(&Summary::constant(2500.0)).p50, s.p50 / 2500.0);
+        assert_eq!(
+            s.ratio_to(&QuantilesUs::constant(2500.0)).p50,
+            s.p50 / 2500.0
+        );
+        // The JSON of a summary is flat, and reads back (NaN as null).
+        let json = serde_json::to_value(summary).unwrap();
+        assert_eq!(json["count"], 10_000);
+        assert_eq!(json["p50"], s.p50);
+        let empty = Summary::of(&new().unwrap());
+        let text = serde_json::to_string(&empty).unwrap();
+        let read: Summary = serde_json::from_str(&text).unwrap();
+        assert!(read.count == 0 && read.quantiles.p99.is_nan(), "{text}");
         write_hgrm(&back, &dir.join("h.hgrm")).unwrap();
         let text = std::fs::read_to_string(dir.join("h.hgrm")).unwrap();
         assert!(text.contains("Total count    =        10000"), "{text}");
         std::fs::remove_dir_all(&dir).unwrap();
-        assert!(Summary::of(&new().unwrap()).p50.is_nan());
     }
 }

@@ -77,123 +77,151 @@ pub fn name(s: &str) -> Result<ServiceName> {
     s.try_into().with_context(|| format!("service name '{s}'"))
 }
 
-/// A per-tick stream (plant or servo samples).
-pub fn tick_stream<T>(
+/// How a publish-subscribe service is opened: every afs stream has safe overflow (a slow
+/// subscriber loses its oldest samples, it never blocks the publisher); the rest differs per
+/// stream (docs/messages.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct StreamSettings {
+    /// Samples a new subscriber receives at once.
+    pub history: usize,
+    /// Samples a subscriber buffers.
+    pub buffer: usize,
+    /// Samples a subscriber may hold at once (None: iceoryx2's default).
+    pub borrowed: Option<usize>,
+    /// Subscribers at most.
+    pub subscribers: usize,
+    /// Publishers at most.
+    pub publishers: usize,
+    /// Nodes at most.
+    pub nodes: usize,
+}
+
+/// The per-tick streams (plant and servo samples): one publisher, history 1, buffers deep
+/// enough for a subscriber that looks twice a second.
+pub const TICK_STREAM: StreamSettings = StreamSettings {
+    history: 1,
+    buffer: TICK_BUFFER,
+    borrowed: Some(4),
+    subscribers: 4,
+    publishers: 1,
+    nodes: 8,
+};
+
+/// The wrench stream. No history: a new subscriber waits at most one sensor period, and keeping
+/// one costs every send (≈ 60 ns of a 0.75 µs hop, `afs bench hop`). Three publishers: the
+/// sensor, a restarted sensor whose predecessor is not cleaned up yet, and the bad-sample
+/// injector of `afs chaos`.
+pub const WRENCH_STREAM: StreamSettings = StreamSettings {
+    history: 0,
+    buffer: WRENCH_BUFFER,
+    borrowed: Some(4),
+    subscribers: 8,
+    publishers: 3,
+    nodes: 12,
+};
+
+/// The low-rate status streams (loop statistics, friction identification, the supervisor's
+/// status): history 1, so a late subscriber gets the latest at once.
+pub const STATUS_STREAM: StreamSettings = StreamSettings {
+    history: 1,
+    buffer: 64,
+    borrowed: None,
+    subscribers: 8,
+    publishers: 1,
+    nodes: 12,
+};
+
+/// The servo's command stream: no history (a restarted servo must not act on an old
+/// command), a few publishers (the supervisor, clients).
+pub const COMMAND_STREAM: StreamSettings = StreamSettings {
+    history: 0,
+    buffer: 16,
+    borrowed: None,
+    subscribers: 4,
+    publishers: 4,
+    nodes: 12,
+};
+
+/// The boards' start-up reports: one publisher per board process (and room for dead ones not
+/// yet cleaned up), history 1 each.
+pub const STARTUP_STREAM: StreamSettings = StreamSettings {
+    history: 1,
+    buffer: 64,
+    borrowed: None,
+    subscribers: 8,
+    publishers: 16,
+    nodes: 24,
+};
+
+/// Opens (or creates) the stream `service_name` of `T` with `settings`.
+pub fn stream<T>(
     node: &Node<Svc>,
     service_name: &str,
+    settings: StreamSettings,
 ) -> Result<publish_subscribe::PortFactory<Svc, T, ()>>
 where
     T: std::fmt::Debug + ZeroCopySend + 'static,
 {
-    node.service_builder(&name(service_name)?)
+    let builder = node
+        .service_builder(&name(service_name)?)
         .publish_subscribe::<T>()
         .enable_safe_overflow(true)
-        .history_size(1)
-        .subscriber_max_buffer_size(TICK_BUFFER)
-        .subscriber_max_borrowed_samples(4)
-        .max_subscribers(4)
-        .max_publishers(1)
-        .max_nodes(8)
+        .history_size(settings.history)
+        .subscriber_max_buffer_size(settings.buffer)
+        .max_subscribers(settings.subscribers)
+        .max_publishers(settings.publishers)
+        .max_nodes(settings.nodes);
+    let builder = match settings.borrowed {
+        Some(n) => builder.subscriber_max_borrowed_samples(n),
+        None => builder,
+    };
+    builder
         .open_or_create()
         .with_context(|| format!("opening service '{service_name}'"))
 }
 
 /// The plant stream.
 pub fn plant(node: &Node<Svc>) -> Result<publish_subscribe::PortFactory<Svc, PlantSample, ()>> {
-    tick_stream(node, service::PLANT)
+    stream(node, service::PLANT, TICK_STREAM)
 }
 
 /// The servo stream.
 pub fn servo(node: &Node<Svc>) -> Result<publish_subscribe::PortFactory<Svc, ServoSample, ()>> {
-    tick_stream(node, service::SERVO)
+    stream(node, service::SERVO, TICK_STREAM)
 }
 
 /// The wrench stream.
 pub fn wrench(node: &Node<Svc>) -> Result<publish_subscribe::PortFactory<Svc, WrenchSample, ()>> {
-    node.service_builder(&name(service::WRENCH)?)
-        .publish_subscribe::<WrenchSample>()
-        .enable_safe_overflow(true)
-        // No history: a new subscriber waits at most one sensor period, and keeping one
-        // costs every send (≈ 60 ns of a 0.75 µs hop, `afs bench hop`).
-        .history_size(0)
-        .subscriber_max_buffer_size(WRENCH_BUFFER)
-        .subscriber_max_borrowed_samples(4)
-        .max_subscribers(8)
-        // The sensor, a restarted sensor whose predecessor is not cleaned up yet, and the
-        // bad-sample injector of `afs chaos`.
-        .max_publishers(3)
-        .max_nodes(12)
-        .open_or_create()
-        .with_context(|| format!("opening service '{}'", service::WRENCH))
-}
-
-/// A low-rate status stream (history 1 so a late subscriber gets the latest at once).
-pub fn status_stream<T>(
-    node: &Node<Svc>,
-    service_name: &str,
-) -> Result<publish_subscribe::PortFactory<Svc, T, ()>>
-where
-    T: std::fmt::Debug + ZeroCopySend + 'static,
-{
-    node.service_builder(&name(service_name)?)
-        .publish_subscribe::<T>()
-        .enable_safe_overflow(true)
-        .history_size(1)
-        .subscriber_max_buffer_size(64)
-        .max_subscribers(8)
-        .max_publishers(1)
-        .max_nodes(12)
-        .open_or_create()
-        .with_context(|| format!("opening service '{service_name}'"))
+    stream(node, service::WRENCH, WRENCH_STREAM)
 }
 
 /// The loop statistics stream.
 pub fn loop_stats(node: &Node<Svc>) -> Result<publish_subscribe::PortFactory<Svc, LoopStats, ()>> {
-    status_stream(node, service::LOOP_STATS)
+    stream(node, service::LOOP_STATS, STATUS_STREAM)
 }
 
 /// The friction identification stream.
 pub fn friction(
     node: &Node<Svc>,
 ) -> Result<publish_subscribe::PortFactory<Svc, FrictionReport, ()>> {
-    status_stream(node, service::FRICTION)
+    stream(node, service::FRICTION, STATUS_STREAM)
 }
 
 /// The supervisor's status stream.
 pub fn supervisor(
     node: &Node<Svc>,
 ) -> Result<publish_subscribe::PortFactory<Svc, SupervisorStatus, ()>> {
-    status_stream(node, service::SUPERVISOR)
+    stream(node, service::SUPERVISOR, STATUS_STREAM)
 }
 
-/// The servo's command stream: no history (a restarted servo must not act on an old
-/// command), a few publishers (the supervisor, clients).
+/// The servo's command stream.
 pub fn command(node: &Node<Svc>) -> Result<publish_subscribe::PortFactory<Svc, ServoCommand, ()>> {
-    node.service_builder(&name(service::COMMAND)?)
-        .publish_subscribe::<ServoCommand>()
-        .enable_safe_overflow(true)
-        .history_size(0)
-        .subscriber_max_buffer_size(16)
-        .max_subscribers(4)
-        .max_publishers(4)
-        .max_nodes(12)
-        .open_or_create()
-        .with_context(|| format!("opening service '{}'", service::COMMAND))
+    stream(node, service::COMMAND, COMMAND_STREAM)
 }
 
-/// The boards' start-up reports: one publisher per board process (and room for dead ones not
-/// yet cleaned up), history 1 each.
+/// The boards' start-up reports.
 pub fn startup(node: &Node<Svc>) -> Result<publish_subscribe::PortFactory<Svc, BoardStartup, ()>> {
-    node.service_builder(&name(service::STARTUP)?)
-        .publish_subscribe::<BoardStartup>()
-        .enable_safe_overflow(true)
-        .history_size(1)
-        .subscriber_max_buffer_size(64)
-        .max_subscribers(8)
-        .max_publishers(16)
-        .max_nodes(24)
-        .open_or_create()
-        .with_context(|| format!("opening service '{}'", service::STARTUP))
+    stream(node, service::STARTUP, STARTUP_STREAM)
 }
 
 /// An estimation service: requests are a slice of samples behind a header, one response each.

@@ -387,7 +387,14 @@ fn soak_fifty_random_kills() {
     );
     let servo_kills = faults_of(&r, "kill-servo").len() as u64;
     assert!(servo_kills > 0);
-    assert_eq!(u64::from(process(&r, "servo").restarts), servo_kills);
+    let servo = process(&r, "servo");
+    assert_eq!(
+        u64::from(servo.restarts),
+        servo_kills,
+        "servo restarts against kill-servo faults; its exits: {:#?}\nstderr: {}",
+        servo.exits,
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert!(s.servo_lost <= servo_kills, "{s:?}");
     // Each restarted servo sends its predecessor's last tick once more; a repeat that had
     // arrived is dropped, never counted as received twice.

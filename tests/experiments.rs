@@ -106,10 +106,12 @@ fn experiment_command_prints_json_and_writes_the_plot() {
         "stderr: {}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let v: serde_json::Value =
-        serde_json::from_slice(&out.stdout).expect("stdout is one JSON object");
-    assert_eq!(v["summary"]["coefficient"], "0.709");
-    assert_eq!(v["passed"], true);
+    let r: afs::tools::experiment::ExperimentReport =
+        serde_json::from_slice(&out.stdout).expect("stdout is one experiment report");
+    assert_eq!(r.experiment, "fig4.6");
+    assert_eq!(r.summary["coefficient"], "0.709");
+    assert!(r.passed && r.checks.iter().all(|c| c.pass), "{r}");
+    assert!(r.plot.ends_with("fig4_6.svg"));
     let plot = dir.join("fig4_6.svg");
     let svg = std::fs::read_to_string(&plot).unwrap();
     assert!(svg.contains("normal force F_N (N)") && svg.contains("tangential force F_t (N)"));
@@ -125,7 +127,7 @@ fn unknown_experiment_is_a_clear_error() {
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
-        err.contains("unknown experiment 'fig9.9'") && err.contains("fig4.8"),
+        err.contains("invalid value 'fig9.9'") && err.contains("fig4.8") && err.contains("fig5.9"),
         "{err}"
     );
 }

@@ -105,7 +105,8 @@ enum Command {
     /// Writes NAME.svg into --out and, with --json, prints one JSON object on stdout.
     /// Exits with status 1 if one of the experiment's acceptance checks fails.
     Experiment {
-        /// friction-id, fig4.5, fig4.6, fig4.7, fig4.8, or all.
+        /// The experiment (docs/experiments.md), or all of them.
+        #[arg(value_parser = experiment_names())]
         name: String,
         /// Directory for the plot(s).
         #[arg(long, default_value = "out")]
@@ -223,6 +224,11 @@ enum Command {
         #[arg(long, default_value = "out/csv")]
         out: PathBuf,
     },
+}
+
+/// The experiments' names and `all`, for `afs experiment --help` and the parser.
+fn experiment_names() -> clap::builder::PossibleValuesParser {
+    clap::builder::PossibleValuesParser::new(NAMES.iter().copied().chain(["all"]))
 }
 
 fn main() -> ExitCode {

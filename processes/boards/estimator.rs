@@ -37,7 +37,7 @@ pub struct EstimatorSummary {
 
 /// Runs until `stop` is set; `startup` is the start-up report begun in `main`.
 pub fn run(prefix: &str, mut startup: Startup, stop: &AtomicBool) -> Result<EstimatorSummary> {
-    let node = ipc::node(prefix, "estimator")?;
+    let node = ipc::node(prefix, msg::Board::Estimator.name())?;
     startup.report.node_ns = Startup::now();
     let tangent_server = ipc::tangent(&node)?
         .server_builder()

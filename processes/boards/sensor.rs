@@ -45,7 +45,7 @@ pub struct SensorSummary {
 pub fn run(args: &SensorArgs, stop: &AtomicBool) -> Result<SensorSummary> {
     args.params.validate().map_err(anyhow::Error::msg)?;
     let mut startup = Startup::new(Board::Sensor, args.main_ns);
-    let node = ipc::node(&args.prefix, "sensor")?;
+    let node = ipc::node(&args.prefix, Board::Sensor.name())?;
     startup.report.node_ns = Startup::now();
     let plant_sub = ipc::plant(&node)?
         .subscriber_builder()

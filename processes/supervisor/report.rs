@@ -4,50 +4,14 @@
 use super::child::{ExitRecord, Timeline};
 use super::join::SampleCounts;
 use crate::chaos::ChaosReport;
+pub use crate::hist::QuantilesUs;
 use crate::tools::record::RecordSummary;
 use afs_shared::check::{self, Check};
 use afs_shared::faults::FaultFigures;
-use afs_shared::msg::{self, FrictionReport, FrictionStatus, LoopFlags, LoopStats};
+use afs_shared::msg::{FrictionReport, FrictionStatus, LoopFlags, LoopStats};
 use afs_shared::scenario::{Agreement, ScenarioReport};
 use serde::{Deserialize, Serialize};
 use std::fmt;
-
-/// Percentiles of a latency distribution (µs).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
-pub struct QuantilesUs {
-    /// Median.
-    #[serde(deserialize_with = "afs_shared::nan::or_null")]
-    pub p50: f64,
-    /// 90th percentile.
-    #[serde(deserialize_with = "afs_shared::nan::or_null")]
-    pub p90: f64,
-    /// 99th percentile.
-    #[serde(deserialize_with = "afs_shared::nan::or_null")]
-    pub p99: f64,
-    /// 99.9th percentile.
-    #[serde(deserialize_with = "afs_shared::nan::or_null")]
-    pub p99_9: f64,
-    /// 99.99th percentile.
-    #[serde(deserialize_with = "afs_shared::nan::or_null")]
-    pub p99_99: f64,
-    /// Largest.
-    #[serde(deserialize_with = "afs_shared::nan::or_null")]
-    pub max: f64,
-}
-
-impl From<&msg::Quantiles> for QuantilesUs {
-    fn from(q: &msg::Quantiles) -> Self {
-        let us = |v: u64| v as f64 / 1000.0;
-        Self {
-            p50: us(q.p50),
-            p90: us(q.p90),
-            p99: us(q.p99),
-            p99_9: us(q.p999),
-            p99_99: us(q.p9999),
-            max: us(q.max),
-        }
-    }
-}
 
 /// Force samples the servo's gate refused, by reason.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]

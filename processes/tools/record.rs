@@ -238,6 +238,8 @@ pub fn read(path: &Path) -> Result<BTreeMap<String, Vec<serde_json::Value>>> {
     Ok(out)
 }
 
+/// A message's fields as (column, value) pairs: nested objects as `a.b`, arrays as `a[i]`,
+/// strings without their JSON quotes.
 fn flatten(prefix: &str, v: &serde_json::Value, out: &mut Vec<(String, String)>) {
     match v {
         serde_json::Value::Object(m) => {
@@ -255,13 +257,15 @@ fn flatten(prefix: &str, v: &serde_json::Value, out: &mut Vec<(String, String)>)
                 flatten(&format!("{prefix}[{i}]"), x, out);
             }
         }
+        serde_json::Value::String(text) => out.push((prefix.to_string(), text.clone())),
+        serde_json::Value::Null => out.push((prefix.to_string(), String::new())),
         other => out.push((prefix.to_string(), other.to_string())),
     }
 }
 
-/// Writes one CSV per topic into `dir` (`plant.csv`, `servo.csv`, …); returns the files.
+/// Writes one CSV per topic into `dir` (`plant.csv`, `servo.csv`, …); returns the files. The
+/// columns are the first message's fields; a field another message lacks is left empty.
 pub fn export_csv(recording: &Path, dir: &Path) -> Result<Vec<PathBuf>> {
-    use std::io::Write as _;
     let topics = read(recording)?;
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let mut files = Vec::new();
@@ -270,30 +274,26 @@ pub fn export_csv(recording: &Path, dir: &Path) -> Result<Vec<PathBuf>> {
         let mut head = Vec::new();
         flatten("", first, &mut head);
         let path = dir.join(format!("{}.csv", topic.trim_start_matches('/')));
-        let mut f = BufWriter::new(
-            std::fs::File::create(&path).with_context(|| format!("creating {}", path.display()))?,
-        );
-        writeln!(
-            f,
-            "{}",
-            head.iter()
-                .map(|h| h.0.as_str())
-                .collect::<Vec<_>>()
-                .join(",")
-        )?;
+        let mut w = csv::Writer::from_path(&path)
+            .with_context(|| format!("creating {}", path.display()))?;
+        w.write_record(head.iter().map(|h| h.0.as_str()))
+            .with_context(|| format!("writing {}", path.display()))?;
+        let mut fields = Vec::new();
         for m in &msgs {
-            let mut row = Vec::new();
-            flatten("", m, &mut row);
-            writeln!(
-                f,
-                "{}",
-                row.iter()
-                    .map(|r| r.1.as_str())
-                    .collect::<Vec<_>>()
-                    .join(",")
-            )?;
+            fields.clear();
+            flatten("", m, &mut fields);
+            let by_name: BTreeMap<&str, &str> = fields
+                .iter()
+                .map(|(k, v)| (k.as_str(), v.as_str()))
+                .collect();
+            w.write_record(
+                head.iter()
+                    .map(|h| by_name.get(h.0.as_str()).copied().unwrap_or("")),
+            )
+            .with_context(|| format!("writing {}", path.display()))?;
         }
-        f.flush()?;
+        w.flush()
+            .with_context(|| format!("writing {}", path.display()))?;
         files.push(path);
     }
     Ok(files)
@@ -372,4 +372,34 @@ pub fn figure(recording: &Path) -> Result<afs_shared::experiments::Figure> {
             },
         ],
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::flatten;
+    use serde_json::json;
+
+    #[test]
+    fn fields_flatten_to_columns_with_plain_strings() {
+        let mut out = Vec::new();
+        flatten(
+            "",
+            &json!({"a": 1.5, "b": {"c": [1, 2]}, "mode": "probing, fast", "x": null}),
+            &mut out,
+        );
+        let want = [
+            ("a", "1.5"),
+            ("b.c[0]", "1"),
+            ("b.c[1]", "2"),
+            ("mode", "probing, fast"),
+            ("x", ""),
+        ];
+        let got: Vec<(&str, &str)> = out.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
+        assert_eq!(got, want);
+        // The csv crate quotes the comma.
+        let mut w = csv::Writer::from_writer(Vec::new());
+        w.write_record(out.iter().map(|f| f.1.as_str())).unwrap();
+        let text = String::from_utf8(w.into_inner().unwrap()).unwrap();
+        assert_eq!(text, "1.5,1,2,\"probing, fast\",\n");
+    }
 }

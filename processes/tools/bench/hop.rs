@@ -5,7 +5,7 @@ use super::transport::{
     AtomicPage, PING, PONG, QUIT, TRANSPORTS, command, initiator_ports, pin_thread, ping,
 };
 use super::{BenchOptions, PartReport, Series, finish_part};
-use crate::hist::{self, Summary};
+use crate::hist::{self, QuantilesUs};
 use crate::ipc;
 use afs_shared::check::Check;
 use anyhow::{Context, Result, bail};
@@ -176,8 +176,9 @@ pub(super) fn hop(opts: &BenchOptions, stop: &AtomicBool) -> Result<HopReport> {
                     hist: o,
                 });
             }
-            let s =
-                |n: &str| Summary::of(&series.iter().find(|x| x.name == n).expect("series").hist);
+            let s = |n: &str| {
+                QuantilesUs::of(&series.iter().find(|x| x.name == n).expect("series").hist)
+            };
             let (atomic, afs, bare, uds) = (
                 s("atomic_rtt"),
                 s("afs_poll_rtt"),

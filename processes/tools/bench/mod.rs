@@ -25,7 +25,7 @@ mod transport;
 
 pub use transport::peer;
 
-use crate::hist::{self, Summary};
+use crate::hist::{self, QuantilesUs, Summary};
 use crate::{ipc, rt};
 use afs_shared::check::Check;
 use anyhow::{Context, Result, bail};
@@ -99,7 +99,7 @@ pub struct SeriesReport {
     pub floor: Option<String>,
     /// Each percentile divided by the floor's.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub ratio_to_floor: Option<Summary>,
+    pub ratio_to_floor: Option<QuantilesUs>,
 }
 
 /// What every part reports: its series by name, its targets, the files it wrote.
@@ -164,7 +164,7 @@ impl fmt::Display for BenchReport {
                 "series (µs)", "p50", "p90", "p99", "p99.9", "p99.99", "max", "p50/floor"
             )?;
             for (series, s) in &part.series {
-                let q = &s.summary_us;
+                let q = &s.summary_us.quantiles;
                 writeln!(
                     f,
                     "  {:<28} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9.2}  {:>9}",
@@ -262,12 +262,12 @@ fn finish_part(
                 if let Some(f) = series.iter().find(|x| x.name == fl) {
                     (
                         Some(fl.to_string()),
-                        Some(sum.ratio_to(&Summary::of(&f.hist))),
+                        Some(sum.quantiles.ratio_to(&QuantilesUs::of(&f.hist))),
                     )
                 } else if let Some(c) = consts.iter().find(|c| c.name == fl) {
                     (
                         Some(format!("{} ({:.3} µs)", c.name, c.value_us)),
-                        Some(sum.ratio_to(&Summary::constant(c.value_us))),
+                        Some(sum.quantiles.ratio_to(&QuantilesUs::constant(c.value_us))),
                     )
                 } else {
                     (None, None)

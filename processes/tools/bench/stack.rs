@@ -3,10 +3,11 @@
 
 use super::transport::pin_thread;
 use super::{BenchOptions, ConstFloor, PartReport, Series, finish_part};
-use crate::hist::{self, Summary};
+use crate::hist::{self, QuantilesUs};
 use crate::supervisor::{DEFAULT_STACK, RunReport, StackFile};
 use crate::{ipc, rt};
 use afs_shared::check::Check;
+use afs_shared::msg::Board;
 use anyhow::{Context, Result, bail};
 use hdrhistogram::Histogram;
 use serde::{Deserialize, Serialize};
@@ -14,6 +15,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
+
+/// The servo's process and node name.
+const SERVO: &str = Board::Servo.name();
 
 /// The loop part's report.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -97,7 +101,7 @@ fn run_stack<T: Send>(
     stack.duration_s = duration_s;
     let hist_dir = dir.join(format!("{prefix}-servo"));
     let _ = std::fs::remove_dir_all(&hist_dir);
-    for p in stack.process.iter_mut().filter(|p| p.name == "servo") {
+    for p in stack.process.iter_mut().filter(|p| p.name == SERVO) {
         p.args
             .extend(["--histograms".to_string(), hist_dir.display().to_string()]);
     }
@@ -170,7 +174,7 @@ fn bare_loop(
         if !running.load(Ordering::Relaxed) {
             return Ok(h);
         }
-        if ipc::census(prefix, false).is_ok_and(|c| c.alive.iter().any(|(n, _)| n == "servo")) {
+        if ipc::census(prefix, false).is_ok_and(|c| c.alive.iter().any(|(n, _)| n == SERVO)) {
             break;
         }
         if t0.elapsed() > Duration::from_secs(30) {
@@ -231,7 +235,7 @@ fn servo_spec() -> Result<(usize, u8)> {
     let p = s
         .process
         .iter()
-        .find(|p| p.name == "servo")
+        .find(|p| p.name == SERVO)
         .context("the built-in stack has no servo")?;
     Ok((
         p.cpu
@@ -264,8 +268,8 @@ pub(super) fn jitter(opts: &BenchOptions, stop: &AtomicBool) -> Result<LoopPart>
             hist: run.wake,
         },
     ];
-    let servo = Summary::of(&series[1].hist);
-    let floor = Summary::of(&series[0].hist);
+    let servo = QuantilesUs::of(&series[1].hist);
+    let floor = QuantilesUs::of(&series[0].hist);
     let targets =
         vec![Check::at_most("servo wake p99 / bare loop p99", servo.p99 / floor.p99, 1.2).target()];
     let part = finish_part(
@@ -405,7 +409,7 @@ pub(super) fn stack(opts: &BenchOptions, stop: &AtomicBool) -> Result<StackPart>
         targets.push(
             Check::at_most(
                 "force age p99 without hog (µs) ≤ sensor period + 20 µs",
-                Summary::of(&s.hist).p99,
+                QuantilesUs::of(&s.hist).p99,
                 sensor_period_us + 20.0,
             )
             .target(),

@@ -204,7 +204,7 @@ impl Board {
     pub const ALL: [Board; 3] = [Board::Servo, Board::Sensor, Board::Estimator];
 
     /// The process name in the stack file.
-    pub fn name(self) -> &'static str {
+    pub const fn name(self) -> &'static str {
         match self {
             Board::Servo => "servo",
             Board::Sensor => "sensor",

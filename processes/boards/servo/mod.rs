@@ -8,29 +8,27 @@
 //! buffer and the probe record are allocated before the loop; iceoryx2 loans come from
 //! pre-mapped shared memory.
 
+mod link;
+mod timing;
+
 use crate::boards::Startup;
-use crate::ipc::{self, Svc};
+use crate::ipc;
 use crate::{hist, rt};
 use afs_shared::msg::{
-    self, Board, Command, LoopFlags, LoopStats, PlantSample, Quantiles, ServoFlags, ServoSample,
-    TangentRequestHeader, TangentResponse, WorldSnapshot,
+    self, Board, Command, LoopFlags, LoopStats, PlantSample, ServoFlags, ServoSample, WorldSnapshot,
 };
 use afs_shared::plant::{Plant, PlantState};
 use afs_shared::scenario::{self, DriverMemo, DriverState, Scenario};
 use afs_shared::servo::{ServoCore, ServoInput, ServoMode};
 use afs_shared::sim::SimConfig;
-use afs_shared::tangent::ProbeSample;
 use afs_shared::watchdog::{GateParams, SampleGate, Verdict};
 use anyhow::{Context, Result, bail};
-use hdrhistogram::Histogram;
-use iceoryx2::pending_response::PendingResponse;
-use iceoryx2::port::client::Client;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
-use iceoryx2::request_mut_uninit::RequestMutUninit;
-use std::mem::MaybeUninit;
-use std::path::{Path, PathBuf};
+use link::EstimatorLink;
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
+use timing::{Timing, publish_stats};
 
 /// Default time the estimator has to answer before a request is re-sent (s).
 pub const ESTIMATOR_TIMEOUT_S: f64 = 1.0;
@@ -75,177 +73,6 @@ pub enum ServoEnd {
     Stopped,
 }
 
-type TangentClient = Client<Svc, [ProbeSample], TangentRequestHeader, TangentResponse, ()>;
-type TangentLoan =
-    RequestMutUninit<Svc, [MaybeUninit<ProbeSample>], TangentRequestHeader, TangentResponse, ()>;
-type TangentPending =
-    PendingResponse<Svc, [ProbeSample], TangentRequestHeader, TangentResponse, ()>;
-
-/// Samples copied into a request per tick: about 57 kB, a few microseconds.
-const COPY_PER_TICK: usize = 1024;
-
-enum Link {
-    Idle,
-    Copying {
-        loan: TangentLoan,
-        next: usize,
-    },
-    Waiting {
-        pending: TangentPending,
-        sent_ns: u64,
-    },
-}
-
-/// The servo's side of the estimator service: copies the probe record into a loaned request
-/// over several ticks, sends it, waits, re-sends after a time-out, gives up after the last
-/// attempt.
-struct EstimatorLink {
-    client: TangentClient,
-    state: Link,
-    request_id: u64,
-    attempt: u32,
-    timeout_ns: u64,
-    attempts: u32,
-    requests: u64,
-    retries: u64,
-    answers: u64,
-}
-
-impl EstimatorLink {
-    fn tick(&mut self, servo: &mut ServoCore, now_ns: u64) {
-        if servo.mode() != ServoMode::AwaitingEstimate {
-            self.state = Link::Idle;
-            self.attempt = 0;
-            return;
-        }
-        let state = std::mem::replace(&mut self.state, Link::Idle);
-        self.state = match state {
-            Link::Idle => {
-                let Some(req) = servo.pending_probe() else {
-                    return;
-                };
-                if self.attempt == 0 {
-                    self.request_id += 1;
-                }
-                let len = req.samples.len().min(ipc::MAX_PROBE_SAMPLES);
-                match self.client.loan_slice_uninit(len) {
-                    Ok(mut loan) => {
-                        let tangent = servo.params().tangent;
-                        *loan.user_header_mut() = TangentRequestHeader {
-                            version: msg::VERSION,
-                            reprobe: u32::from(req.reprobe),
-                            request_id: self.request_id,
-                            attempt: self.attempt,
-                            reserved: 0,
-                            publish_ns: 0,
-                            base_angle_rad: req.base_angle,
-                            plan: req.plan.into(),
-                            params: (&tangent).into(),
-                        };
-                        Link::Copying { loan, next: 0 }
-                    }
-                    // No memory to loan (should not happen: static allocation): try next tick.
-                    Err(_) => Link::Idle,
-                }
-            }
-            Link::Copying { mut loan, next } => {
-                let Some(req) = servo.pending_probe() else {
-                    return;
-                };
-                let dst = loan.payload_mut();
-                let end = (next + COPY_PER_TICK).min(dst.len());
-                for (d, s) in dst[next..end].iter_mut().zip(&req.samples[next..end]) {
-                    d.write(*s);
-                }
-                if end < dst.len() {
-                    Link::Copying { loan, next: end }
-                } else {
-                    loan.user_header_mut().publish_ns = rt::monotonic_ns();
-                    // SAFETY: every element of the slice was written above.
-                    let request = unsafe { loan.assume_init() };
-                    match request.send() {
-                        Ok(pending) => {
-                            self.requests += 1;
-                            Link::Waiting {
-                                pending,
-                                sent_ns: now_ns,
-                            }
-                        }
-                        Err(_) => Link::Idle,
-                    }
-                }
-            }
-            Link::Waiting { pending, sent_ns } => {
-                let mut answer = None;
-                while let Ok(Some(r)) = pending.receive() {
-                    if r.payload().request_id == self.request_id {
-                        answer = Some(*r.payload());
-                    }
-                }
-                if let Some(a) = answer {
-                    self.answers += 1;
-                    self.attempt = 0;
-                    match a.to_outcome() {
-                        Some(o) => servo.apply_tangent_outcome(&o),
-                        // The estimator refused the request: nothing to learn from it.
-                        None => servo.give_up_estimate(),
-                    }
-                    Link::Idle
-                } else if now_ns.saturating_sub(sent_ns) > self.timeout_ns {
-                    self.attempt += 1;
-                    self.retries += 1;
-                    if self.attempt >= self.attempts {
-                        self.attempt = 0;
-                        servo.give_up_estimate();
-                    }
-                    Link::Idle
-                } else {
-                    Link::Waiting { pending, sent_ns }
-                }
-            }
-        };
-    }
-}
-
-/// Latency histograms, allocated before the loop; recording never allocates.
-struct Timing {
-    wake: Histogram<u64>,
-    exec: Histogram<u64>,
-    age: Histogram<u64>,
-}
-
-impl Timing {
-    fn new() -> Result<Self> {
-        Ok(Self {
-            wake: hist::new()?,
-            exec: hist::new()?,
-            age: hist::new()?,
-        })
-    }
-
-    /// Saves the histograms (V2 format) as `wake.hdr`, `exec.hdr` and `force_age.hdr` in `dir`.
-    fn save(&self, dir: &Path) -> Result<()> {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        hist::save(&self.wake, &dir.join("wake.hdr"))?;
-        hist::save(&self.exec, &dir.join("exec.hdr"))?;
-        hist::save(&self.age, &dir.join("force_age.hdr"))
-    }
-}
-
-fn quantiles(h: &Histogram<u64>) -> Quantiles {
-    if h.is_empty() {
-        return Quantiles::default();
-    }
-    Quantiles {
-        p50: h.value_at_quantile(0.5),
-        p90: h.value_at_quantile(0.9),
-        p99: h.value_at_quantile(0.99),
-        p999: h.value_at_quantile(0.999),
-        p9999: h.value_at_quantile(0.9999),
-        max: h.max(),
-    }
-}
-
 /// Runs the board until the scenario ends, the duration passes or `stop` is set.
 pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
     let scenario = Scenario::new(&args.scenario, &args.base).map_err(anyhow::Error::msg)?;
@@ -259,7 +86,7 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
     };
 
     let mut startup = Startup::new(Board::Servo, args.main_ns);
-    let node = ipc::node(&args.prefix, "servo")?;
+    let node = ipc::node(&args.prefix, msg::Board::Servo.name())?;
     startup.report.node_ns = Startup::now();
     let plant_pub = ipc::plant(&node)?
         .publisher_builder()
@@ -448,17 +275,7 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
         }
     }
     servo.set_tare(first.tare());
-    let mut link = EstimatorLink {
-        client,
-        state: Link::Idle,
-        request_id: 0,
-        attempt: 0,
-        timeout_ns: (args.estimator_timeout_s * 1e9) as u64,
-        attempts: args.estimator_attempts.max(1),
-        requests: 0,
-        retries: 0,
-        answers: 0,
-    };
+    let mut link = EstimatorLink::new(client, args.estimator_timeout_s, args.estimator_attempts);
     let mut timing = Timing::new()?;
     let rtr = rt::setup(args.priority, true, args.cpu);
     startup.report.rt_ns = Startup::now();
@@ -596,12 +413,12 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
         }
         if stats.ticks.is_multiple_of(1000) {
             publish_stats(&mut stats, &timing, &gate, &link, &servo, &stats_pub);
-        } else if stats.ticks % 1000 == 500 && matches!(link.state, Link::Idle) {
+        } else if stats.ticks % 1000 == 500 && link.is_idle() {
             // Every 0.1 s, between requests: drop the connections of an estimator that died
             // (a file pair per dead server) and connect a restarted one. Without a change
             // this only reads the service's port list; with one it maps or unmaps a segment,
             // as the next send would.
-            let _ = link.client.update_connections();
+            link.update_connections();
             startup.update_connections();
         }
         seq += 1;
@@ -641,34 +458,5 @@ fn snapshot_of(
         driver_leg_start: [memo.leg_start_s, memo.leg_start_u],
         controller: servo.state(),
         plant: plant_sample,
-    }
-}
-
-fn publish_stats(
-    stats: &mut LoopStats,
-    timing: &Timing,
-    gate: &SampleGate,
-    link: &EstimatorLink,
-    servo: &ServoCore,
-    publisher: &iceoryx2::port::publisher::Publisher<Svc, LoopStats, ()>,
-) {
-    let c = gate.counters();
-    stats.seq += 1;
-    stats.wake_latency = quantiles(&timing.wake);
-    stats.exec = quantiles(&timing.exec);
-    stats.force_age = quantiles(&timing.age);
-    stats.bad_non_finite = c.non_finite;
-    stats.bad_out_of_range = c.out_of_range;
-    stats.bad_seq_repeat = c.seq_repeat;
-    stats.bad_seq_backwards = c.seq_backwards;
-    stats.bad_future = c.future;
-    stats.bad_version = c.version;
-    stats.safe_entries = servo.counters().safe_entries as u64;
-    stats.requests = link.requests;
-    stats.retries = link.retries;
-    stats.answers = link.answers;
-    stats.publish_ns = rt::monotonic_ns();
-    if publisher.send_copy(*stats).is_err() {
-        stats.publish_failures += 1;
     }
 }
