@@ -23,6 +23,21 @@ pub fn record(h: &mut Histogram<u64>, ns: u64) {
     let _ = h.record(ns.clamp(1, MAX_NS));
 }
 
+/// A histogram's percentiles as the messages carry them (all 0 for an empty one).
+pub fn quantiles(h: &Histogram<u64>) -> afs_shared::msg::Quantiles {
+    if h.is_empty() {
+        return afs_shared::msg::Quantiles::default();
+    }
+    afs_shared::msg::Quantiles {
+        p50: h.value_at_quantile(0.5),
+        p90: h.value_at_quantile(0.9),
+        p99: h.value_at_quantile(0.99),
+        p999: h.value_at_quantile(0.999),
+        p9999: h.value_at_quantile(0.9999),
+        max: h.max(),
+    }
+}
+
 /// Saves `h` in the V2 format.
 pub fn save(h: &Histogram<u64>, path: &Path) -> Result<()> {
     let mut buf = Vec::new();

@@ -7,7 +7,7 @@
 
 use afs_shared::msg::{
     BoardStartup, FrictionReport, LoopStats, PlantSample, RotationRequestHeader, RotationResponse,
-    RotationSample, ServoCommand, ServoSample, SupervisorStatus, TangentRequestHeader,
+    RotationSample, SensorStats, ServoCommand, ServoSample, SupervisorStatus, TangentRequestHeader,
     TangentResponse, WorldSnapshot, WrenchSample, service,
 };
 use afs_shared::tangent::ProbeSample;
@@ -198,6 +198,13 @@ pub fn wrench(node: &Node<Svc>) -> Result<publish_subscribe::PortFactory<Svc, Wr
 /// The loop statistics stream.
 pub fn loop_stats(node: &Node<Svc>) -> Result<publish_subscribe::PortFactory<Svc, LoopStats, ()>> {
     stream(node, service::LOOP_STATS, STATUS_STREAM)
+}
+
+/// The sensor board's statistics stream.
+pub fn sensor_stats(
+    node: &Node<Svc>,
+) -> Result<publish_subscribe::PortFactory<Svc, SensorStats, ()>> {
+    stream(node, service::SENSOR_STATS, STATUS_STREAM)
 }
 
 /// The friction identification stream.

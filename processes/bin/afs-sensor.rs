@@ -1,10 +1,13 @@
-//! `afs-sensor`: the force-sensor board (its own 7 kHz clock and the sensor model).
+//! `afs-sensor`: the force-sensor board: the sensor model on its own 7 kHz clock, or a real
+//! sensor (or `afs-netft`) speaking ATI's RDT over UDP.
 //!
 //! ```text
 //! afs-sensor --prefix afs --scenario surface-tracking --cpu 1 --priority 85
+//! afs-sensor --prefix afs --source rdt --address 192.168.1.1 --counts-per-force 1000000
 //! ```
 
-use afs::boards::sensor::{SensorArgs, run};
+use afs::boards::sensor::rdt::RdtArgs;
+use afs::boards::sensor::{SensorArgs, Source, run};
 use afs::boards::{Common, stop_flag};
 use clap::Parser;
 use std::process::ExitCode;
@@ -15,10 +18,16 @@ use std::process::ExitCode;
 struct Cli {
     #[command(flatten)]
     common: Common,
-    /// Low-pass cut-off (Hz, 0 disables), overriding the set-up's.
+    /// Where the samples come from: the sensor model on the simulated world, or an RDT device.
+    #[arg(long, default_value = "model", value_parser = ["model", "rdt"])]
+    source: String,
+    #[command(flatten)]
+    rdt: RdtArgs,
+    /// Low-pass cut-off (Hz, 0 disables), overriding the set-up's (model).
     #[arg(long)]
     cutoff_hz: Option<f64>,
-    /// Sample rate (Hz), overriding the set-up's.
+    /// Sample rate (Hz), overriding the set-up's (model: the board's clock; rdt: the device's
+    /// internal rate).
     #[arg(long)]
     rate_hz: Option<f64>,
 }
@@ -35,6 +44,10 @@ fn main() -> ExitCode {
         if let Some(r) = cli.rate_hz {
             params.rate_hz = r;
         }
+        let source = match cli.source.as_str() {
+            "rdt" => Source::Rdt(cli.rdt.settings(params.rate_hz)?),
+            _ => Source::Model,
+        };
         let stop = stop_flag()?;
         run(
             &SensorArgs {
@@ -43,6 +56,7 @@ fn main() -> ExitCode {
                 seed: scenario.cfg.seed,
                 cpu: cli.common.cpu,
                 priority: cli.common.priority,
+                source,
                 main_ns,
             },
             &stop,

@@ -164,6 +164,31 @@ enum Command {
         #[arg(long)]
         in_turn: bool,
     },
+    /// Stream a force/torque sensor speaking ATI's RDT over UDP (an ATI Net F/T, Axia80, or
+    /// `afs-netft`) onto a prefix's wrench topic, for any client, and report its rate, loss,
+    /// reordering and receive jitter (docs/sensor.md).
+    ///
+    /// Exits with status 2 and says why if the device does not answer, answers with datagrams
+    /// that are not RDT records, or streams to another client.
+    Sensor {
+        #[command(flatten)]
+        rdt: afs::boards::sensor::rdt::RdtArgs,
+        /// The device's internal sample rate (Hz): the rate of its sample counter.
+        #[arg(long, default_value_t = 7000.0)]
+        rate_hz: f64,
+        /// Prefix whose wrench topic gets the samples.
+        #[arg(long, default_value = "afs")]
+        prefix: String,
+        /// Seconds to stream after the first record (0: until Ctrl-C).
+        #[arg(long, default_value_t = 0.0)]
+        duration: f64,
+        /// Record the samples to this MCAP file.
+        #[arg(long)]
+        record: Option<PathBuf>,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
     /// Show a running stack's processes, health and loop statistics.
     Status {
         /// Stack prefix.
@@ -318,6 +343,30 @@ fn run() -> Result<ExitCode> {
                 say!("{}", serde_json::to_string_pretty(&status)?);
             } else {
                 show!(status);
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Sensor {
+            rdt,
+            rate_hz,
+            prefix,
+            duration,
+            record,
+            json,
+        } => {
+            let stop = afs::boards::stop_flag()?;
+            let opts = afs::tools::sensor::SensorOptions {
+                rdt: rdt.settings(rate_hz)?,
+                prefix,
+                duration_s: duration,
+                record,
+                answer_within_s: 1.0,
+            };
+            let report = afs::tools::sensor::run(&opts, &stop)?;
+            if json {
+                say!("{}", serde_json::to_string_pretty(&report)?);
+            } else {
+                show!(report);
             }
             Ok(ExitCode::SUCCESS)
         }

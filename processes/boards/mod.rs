@@ -3,6 +3,7 @@
 //! SIGINT/SIGTERM/SIGHUP, and the start-up report.
 
 pub mod estimator;
+pub mod netft;
 pub mod sensor;
 pub mod servo;
 

@@ -150,7 +150,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunReport> {
     let procs = std::mem::take(&mut sup.procs);
     let monitor = sup.monitor.clone();
     let faults = sup.faults.figures();
-    let (stats, friction) = (sup.stats, sup.friction);
+    let (stats, friction, sensor_stats) = (sup.stats, sup.friction, sup.sensor_stats);
     let (finished, interrupted) = (sup.finished, sup.interrupted);
     let samples = sup.joiner.counts(sup.wrench_received);
     drop(sup);
@@ -248,6 +248,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunReport> {
         reference,
         agreement,
         loop_stats: stats.as_ref().map(LoopReport::from),
+        sensor: sensor_stats.as_ref().map(SensorReport::from),
         friction: friction.as_ref().map(FrictionIdReport::from),
         samples,
         processes: procs

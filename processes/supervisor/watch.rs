@@ -12,7 +12,7 @@ use crate::tools::record::{Rec, Recorder};
 use afs_shared::faults::FaultMonitor;
 use afs_shared::msg::{
     self, Board, BoardStartup, FrictionReport, LoopStats, PlantSample, ProcessState, ProcessStatus,
-    ServoCommand, ServoSample, SupervisorStatus, WrenchFlags, WrenchSample, fixed_str,
+    SensorStats, ServoCommand, ServoSample, SupervisorStatus, WrenchFlags, WrenchSample, fixed_str,
 };
 use afs_shared::scenario::{Scenario, ScenarioMonitor};
 use afs_shared::servo::ServoMode;
@@ -32,6 +32,8 @@ pub struct Ports {
     wrench: Subscriber<Svc, WrenchSample, ()>,
     /// The servo loop's statistics.
     pub stats: Subscriber<Svc, LoopStats, ()>,
+    /// The sensor board's statistics.
+    pub sensor_stats: Subscriber<Svc, SensorStats, ()>,
     friction: Subscriber<Svc, FrictionReport, ()>,
     startup: Subscriber<Svc, BoardStartup, ()>,
     status: Publisher<Svc, SupervisorStatus, ()>,
@@ -61,6 +63,10 @@ impl Ports {
                 .subscriber_builder()
                 .create()
                 .context("creating the loop-statistics subscriber")?,
+            sensor_stats: ipc::sensor_stats(node)?
+                .subscriber_builder()
+                .create()
+                .context("creating the sensor-statistics subscriber")?,
             friction: ipc::friction(node)?
                 .subscriber_builder()
                 .create()
@@ -102,6 +108,8 @@ pub struct Supervisor<'a> {
     pub joiner: Joiner,
     /// The servo loop's newest statistics.
     pub stats: Option<LoopStats>,
+    /// The sensor board's newest statistics.
+    pub sensor_stats: Option<SensorStats>,
     /// The estimator's newest friction report.
     pub friction: Option<FrictionReport>,
     /// The servo ran the scenario to its end.
@@ -150,6 +158,7 @@ impl<'a> Supervisor<'a> {
             steady: [None, None],
             joiner: Joiner::default(),
             stats: None,
+            sensor_stats: None,
             friction: None,
             finished: false,
             interrupted: false,
@@ -309,6 +318,9 @@ impl<'a> Supervisor<'a> {
                     p.data_flowing(Instant::now(), rt::monotonic_ns());
                 }
             }
+        }
+        while let Ok(Some(s)) = self.ports.sensor_stats.receive() {
+            self.sensor_stats = Some(*s.payload());
         }
         while let Ok(Some(s)) = self.ports.stats.receive() {
             self.stats = Some(*s.payload());
@@ -548,9 +560,12 @@ impl<'a> Supervisor<'a> {
         for p in self.procs.iter_mut() {
             p.stop(Duration::from_secs(2));
         }
-        // The servo's last words.
+        // The servo's and the sensor's last words.
         while let Ok(Some(s)) = self.ports.stats.receive() {
             self.stats = Some(*s.payload());
+        }
+        while let Ok(Some(s)) = self.ports.sensor_stats.receive() {
+            self.sensor_stats = Some(*s.payload());
         }
         wall_s
     }

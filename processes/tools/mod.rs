@@ -1,6 +1,8 @@
-//! The tools around the stack: benchmarks, in-process experiments, recordings, plots.
+//! The tools around the stack: benchmarks, in-process experiments, recordings, plots, a
+//! real sensor's stream (`afs sensor`).
 
 pub mod bench;
 pub mod experiment;
 pub mod plot;
 pub mod record;
+pub mod sensor;

@@ -21,6 +21,7 @@ pub mod multicontact;
 pub mod nan;
 pub mod plant;
 pub mod probe;
+pub mod rdt;
 pub mod scenario;
 pub mod sensor;
 pub mod servo;

@@ -4,11 +4,12 @@
 use super::link::EstimatorLink;
 use crate::ipc::Svc;
 use crate::{hist, rt};
-use afs_shared::msg::{LoopStats, Quantiles};
+use afs_shared::msg::LoopStats;
 use afs_shared::servo::ServoCore;
 use afs_shared::watchdog::SampleGate;
 use anyhow::{Context, Result};
 use hdrhistogram::Histogram;
+use hist::quantiles;
 use std::path::Path;
 
 /// Latency histograms, allocated before the loop; recording never allocates.
@@ -36,20 +37,6 @@ impl Timing {
         hist::save(&self.wake, &dir.join("wake.hdr"))?;
         hist::save(&self.exec, &dir.join("exec.hdr"))?;
         hist::save(&self.age, &dir.join("force_age.hdr"))
-    }
-}
-
-fn quantiles(h: &Histogram<u64>) -> Quantiles {
-    if h.is_empty() {
-        return Quantiles::default();
-    }
-    Quantiles {
-        p50: h.value_at_quantile(0.5),
-        p90: h.value_at_quantile(0.9),
-        p99: h.value_at_quantile(0.99),
-        p999: h.value_at_quantile(0.999),
-        p9999: h.value_at_quantile(0.9999),
-        max: h.max(),
     }
 }
 

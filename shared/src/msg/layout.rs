@@ -126,6 +126,14 @@ pub fn layouts() -> Vec<MessageLayout> {
             requests: "u64", retries: "u64", answers: "u64", publish_failures: "u64",
             commands: "u64", bad_commands: "u64",
         ]),
+        layout!(SensorStats, "SensorStats", [
+            version: "u32", source: "u32", seq: "u64", publish_ns: "u64", published: "u64",
+            late_periods: "u64", rdt_datagrams: "u64", rdt_bad_datagrams: "u64",
+            rdt_records: "u64", rdt_lost: "u64", rdt_repeated: "u64", rdt_reordered: "u64",
+            rdt_late: "u64", rdt_status_errors: "u64", rdt_last_status: "u32",
+            rdt_streaming: "u32", rdt_requests: "u64", rdt_interval: "Quantiles",
+            rdt_excess_delay: "Quantiles",
+        ]),
         layout!(crate::tangent::ProbeSample, "ProbeSample", [
             t: "f64", force: "f64[2]", tip: "f64[2]", phase: "f64", probe: "u8",
             measured: "bool",
@@ -279,6 +287,10 @@ mod tests {
                 "afs::ServoSample"
             );
             assert_eq!(<LoopStats as ZeroCopySend>::type_name(), "afs::LoopStats");
+            assert_eq!(
+                <SensorStats as ZeroCopySend>::type_name(),
+                "afs::SensorStats"
+            );
         }
     }
 }

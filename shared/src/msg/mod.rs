@@ -33,6 +33,8 @@ pub mod service {
     pub const PLANT: &str = "afs/plant/state";
     /// [`WrenchSample`](super::WrenchSample), every sensor sample (sensor → servo).
     pub const WRENCH: &str = "afs/sensor/wrench";
+    /// [`SensorStats`](super::SensorStats), 10 Hz.
+    pub const SENSOR_STATS: &str = "afs/sensor/stats";
     /// [`ServoSample`](super::ServoSample), every servo tick.
     pub const SERVO: &str = "afs/servo/state";
     /// [`LoopStats`](super::LoopStats), 10 Hz.

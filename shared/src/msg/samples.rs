@@ -117,11 +117,11 @@ pub struct WrenchSample {
     /// Monotonic time the sensor process started (ns): a restarted sensor has a later epoch
     /// and numbers its samples from 0 again.
     pub epoch_ns: u64,
-    /// `seq` of the [`PlantSample`] sampled.
+    /// `seq` of the [`PlantSample`] sampled (0 from an RDT device, which does not know it).
     pub plant_seq: u64,
-    /// Its `tick_ns`.
+    /// Its `tick_ns` (0 from an RDT device).
     pub plant_tick_ns: u64,
-    /// Monotonic time of the sample (ns).
+    /// Monotonic time of the sample (ns): from an RDT device, the datagram's receipt.
     pub sample_ns: u64,
     /// Monotonic time of publication (ns).
     pub publish_ns: u64,
@@ -129,7 +129,8 @@ pub struct WrenchSample {
     pub force_n: [f64; 2],
     /// Measured moment (N·m).
     pub torque_nm: f64,
-    /// The zero-load reading taken in free air at start-up, to subtract (N).
+    /// The zero-load reading taken in free air at start-up, to subtract (N); 0 from an RDT
+    /// device, whose own bias does it.
     pub tare_force_n: [f64; 2],
     /// Its moment (N·m).
     pub tare_torque_nm: f64,

@@ -24,6 +24,64 @@ pub struct Quantiles {
     pub max: u64,
 }
 
+wire_code! {
+    /// [`SensorStats::source`]: where the sensor board's samples come from.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
+    #[serde(rename_all = "kebab-case")]
+    pub enum SensorSource {
+        /// The sensor model applied to the simulated world.
+        Model = 0,
+        /// A device (or its emulator) speaking ATI's RDT over UDP.
+        Rdt = 1,
+    }
+}
+
+/// The sensor board's statistics since it started, published at 10 Hz. The `rdt_*` fields
+/// count what an RDT device sent; they stay 0 for the sensor model.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+#[type_name("afs::SensorStats")]
+#[repr(C)]
+pub struct SensorStats {
+    /// [`VERSION`](super::VERSION).
+    pub version: u32,
+    /// [`SensorSource`].
+    pub source: u32,
+    /// Publication index.
+    pub seq: u64,
+    /// Monotonic time of publication (ns).
+    pub publish_ns: u64,
+    /// Wrench samples published.
+    pub published: u64,
+    /// Model: periods that woke a whole period late.
+    pub late_periods: u64,
+    /// RDT: datagrams received.
+    pub rdt_datagrams: u64,
+    /// RDT: datagrams that were not whole records (refused).
+    pub rdt_bad_datagrams: u64,
+    /// RDT: records received.
+    pub rdt_records: u64,
+    /// RDT: records missing from the stream (gaps in `rdt_sequence`).
+    pub rdt_lost: u64,
+    /// RDT: records received twice.
+    pub rdt_repeated: u64,
+    /// RDT: records older than one already received.
+    pub rdt_reordered: u64,
+    /// RDT: records that arrived later than the late limit.
+    pub rdt_late: u64,
+    /// RDT: records with a non-zero status word.
+    pub rdt_status_errors: u64,
+    /// RDT: the last non-zero status word.
+    pub rdt_last_status: u32,
+    /// RDT: 1 while records arrive, 0 while the device is silent.
+    pub rdt_streaming: u32,
+    /// RDT: streaming requests sent (the first, and one per silence).
+    pub rdt_requests: u64,
+    /// RDT: time between datagrams (ns): the receive jitter around the device's period.
+    pub rdt_interval: Quantiles,
+    /// RDT: excess delay of the records over the least-delayed one (ns).
+    pub rdt_excess_delay: Quantiles,
+}
+
 wire_flags! {
     /// [`LoopStats::flags`]: what the real-time set-up achieved.
     pub struct LoopFlags {

@@ -1,47 +1,21 @@
-//! The force-sensor board: its own clock (default 7 kHz, like an ATI Net F/T), the latest world
-//! sample in, the sensor model ([`SensorModel`]: noise, bias, drift, low-pass, quantization,
+//! The sensor board's model source: its own clock (default 7 kHz, like an ATI Net F/T), the
+//! latest world sample in, the sensor model ([`SensorModel`]: noise, bias, drift, low-pass, quantization,
 //! saturation) applied, one [`WrenchSample`] out per period.
 //!
 //! At start-up it takes its zero-load reading in free air (as the lockstep does) and sends it
 //! with every sample as the tare; when the first world sample arrives it lets its filter settle
 //! on it for 10 ms before publishing, as the lockstep does.
 
+use super::{SensorArgs, SensorSummary, StatsOut};
 use crate::boards::Startup;
 use crate::ipc;
 use crate::rt;
-use afs_shared::msg::{self, Board, PlantSample, WrenchFlags, WrenchSample};
+use afs_shared::msg::{self, Board, PlantSample, SensorSource, WrenchFlags, WrenchSample};
 use afs_shared::sensor::SensorModel;
-use afs_shared::sensor::SensorParams;
 use anyhow::{Context, Result};
 use std::sync::atomic::{AtomicBool, Ordering};
 
-/// How the sensor runs.
-#[derive(Debug, Clone)]
-pub struct SensorArgs {
-    /// Stack prefix.
-    pub prefix: String,
-    /// The sensor model.
-    pub params: SensorParams,
-    /// Noise seed.
-    pub seed: u64,
-    /// CPU to pin to.
-    pub cpu: Option<usize>,
-    /// SCHED_FIFO priority (0: normal).
-    pub priority: u8,
-    /// Monotonic time `main` was entered (ns), for the start-up report.
-    pub main_ns: u64,
-}
-
-/// What the board did.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct SensorSummary {
-    /// Samples published.
-    pub published: u64,
-    /// Periods that woke a whole period late.
-    pub late: u64,
-}
-
-/// Runs until `stop` is set.
+/// Runs the model source until `stop` is set.
 pub fn run(args: &SensorArgs, stop: &AtomicBool) -> Result<SensorSummary> {
     args.params.validate().map_err(anyhow::Error::msg)?;
     let mut startup = Startup::new(Board::Sensor, args.main_ns);
@@ -57,6 +31,7 @@ pub fn run(args: &SensorArgs, stop: &AtomicBool) -> Result<SensorSummary> {
         .backpressure_strategy(ipc::BACKPRESSURE)
         .create()
         .context("wrench publisher")?;
+    let mut stats = StatsOut::open(&node, SensorSource::Model)?;
     startup.open(&node)?;
     startup.report.ports_ns = Startup::now();
     let mut model = SensorModel::new(args.params, args.seed);
@@ -80,6 +55,11 @@ pub fn run(args: &SensorArgs, stop: &AtomicBool) -> Result<SensorSummary> {
         let now = rt::monotonic_ns();
         if now >= deadline + period_ns {
             summary.late += 1;
+        }
+        if stats.due(now) {
+            stats.stats.published = summary.published;
+            stats.stats.late_periods = summary.late;
+            stats.publish(now);
         }
         while let Ok(Some(s)) = plant_sub.receive() {
             let p = *s.payload();
