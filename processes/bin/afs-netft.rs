@@ -46,6 +46,10 @@ struct Cli {
     /// Start raw, not biased at the free-air reading.
     #[arg(long)]
     no_power_up_bias: bool,
+    /// Sample nothing before the simulated world's first sample (in a stack); without it, the
+    /// device samples free air until then.
+    #[arg(long)]
+    wait_for_world: bool,
     /// Fraction of datagrams lost.
     #[arg(long, default_value_t = 0.0)]
     loss: f64,
@@ -116,6 +120,7 @@ fn main() -> ExitCode {
                 },
                 fault_seed: cli.fault_seed,
                 power_up_bias: !cli.no_power_up_bias,
+                wait_for_world: cli.wait_for_world,
             },
             &stop,
         )

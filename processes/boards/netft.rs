@@ -6,8 +6,9 @@
 //! `ft_sequence` free-running, bias, stop, sample counts, buffered datagrams), with the faults
 //! of [`Impairments`] on the way out.
 //!
-//! Before the world's first sample (or with no stack on its prefix) it samples free air, so it
-//! also serves on its own.
+//! Before the world's first sample (or with no stack on its prefix) it samples free air, with a
+//! noise stream of its own, so it also serves on its own and the world's samples still meet the
+//! model source's noise.
 //!
 //! It starts as a device its operator biased in free air before the run: its zero is the
 //! sensor model's free-air reading, as the model source's tare (`--no-power-up-bias`: raw).
@@ -51,6 +52,9 @@ pub struct NetftArgs {
     pub fault_seed: u64,
     /// Start biased at the free-air reading.
     pub power_up_bias: bool,
+    /// Take no sample before the world's first (in a stack: the scenario starts in contact,
+    /// and the servo's first force must be of it, as with the model source).
+    pub wait_for_world: bool,
 }
 
 /// What the emulator did.
@@ -95,6 +99,7 @@ fn serve(args: &NetftArgs, stop: &AtomicBool) -> Result<NetftSummary> {
         .context("making the socket non-blocking")?;
     let mut model = SensorModel::new(args.params, args.seed);
     let tare = afs_shared::sim::tare(&mut model);
+    let mut idle = SensorModel::new(args.params, args.seed ^ 0x1d1e_a1f0_f1ee_a1f0);
     let (ft0, rdt0) = args.impairments.first_sequences();
     let mut device: Device<SocketAddr> = Device::new(ft0, rdt0, args.records_per_packet);
     if args.power_up_bias {
@@ -142,6 +147,10 @@ fn serve(args: &NetftArgs, stop: &AtomicBool) -> Result<NetftSummary> {
                 latest = Some(p);
             }
         }
+        if args.wait_for_world && latest.is_none() {
+            deadline += period_ns;
+            continue;
+        }
         // Before the world's first sample (or without a stack) the sensor is in free air.
         let truth = match latest {
             Some(p) => {
@@ -155,6 +164,9 @@ fn serve(args: &NetftArgs, stop: &AtomicBool) -> Result<NetftSummary> {
             }
             None => Wrench::default(),
         };
+        // Free air before the world comes from a noise stream of its own: the world's samples
+        // then meet the same noise, drift and filter as the model source's and the lockstep's.
+        let model = if warmed { &mut model } else { &mut idle };
         let t0 = *first_ns.get_or_insert(now);
         let t_s = (now - t0) as f64 * 1e-9;
         let r = model.sample(truth);
@@ -185,7 +197,11 @@ fn serve(args: &NetftArgs, stop: &AtomicBool) -> Result<NetftSummary> {
         deadline += period_ns;
         let now2 = rt::monotonic_ns();
         if now2 > deadline + 100 * period_ns {
-            deadline = now2 + period_ns;
+            // More than 100 samples behind (the host stalled): skip them, and let the sample
+            // counter move on as a device's would, so that ft_sequence keeps time.
+            let behind = (now2 - deadline) / period_ns;
+            device.skip(behind as u32);
+            deadline += behind * period_ns + period_ns;
         }
     }
     Ok(summary)

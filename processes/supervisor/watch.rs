@@ -321,6 +321,9 @@ impl<'a> Supervisor<'a> {
         }
         while let Ok(Some(s)) = self.ports.sensor_stats.receive() {
             self.sensor_stats = Some(*s.payload());
+            if let Some(r) = self.recorder.as_mut() {
+                r.push(Rec::SensorStats(*s.payload()));
+            }
         }
         while let Ok(Some(s)) = self.ports.stats.receive() {
             self.stats = Some(*s.payload());

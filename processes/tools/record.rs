@@ -7,7 +7,8 @@
 //! counts it (the summary reports the count), so a slow disk can never stall the supervisor.
 
 use afs_shared::msg::{
-    self, FrictionReport, LoopStats, PlantSample, ServoSample, SupervisorStatus, WrenchSample,
+    self, FrictionReport, LoopStats, PlantSample, SensorStats, ServoSample, SupervisorStatus,
+    WrenchSample,
 };
 use anyhow::{Context, Result};
 use serde::Serialize;
@@ -32,16 +33,19 @@ pub enum Rec {
     Friction(FrictionReport),
     /// `/supervisor`.
     Status(SupervisorStatus),
+    /// `/sensor_stats`.
+    SensorStats(SensorStats),
 }
 
 /// The topics, in channel order: (topic, message type name).
-pub const TOPICS: [(&str, &str); 6] = [
+pub const TOPICS: [(&str, &str); 7] = [
     ("/plant", "afs::PlantSample"),
     ("/servo", "afs::ServoSample"),
     ("/wrench", "afs::WrenchSample"),
     ("/loop_stats", "afs::LoopStats"),
     ("/friction", "afs::FrictionReport"),
     ("/supervisor", "afs::SupervisorStatus"),
+    ("/sensor_stats", "afs::SensorStats"),
 ];
 
 impl Rec {
@@ -53,6 +57,7 @@ impl Rec {
             Rec::Stats(_) => 3,
             Rec::Friction(_) => 4,
             Rec::Status(_) => 5,
+            Rec::SensorStats(_) => 6,
         }
     }
 
@@ -64,6 +69,7 @@ impl Rec {
             Rec::Stats(s) => s.publish_ns,
             Rec::Friction(s) => s.publish_ns,
             Rec::Status(s) => s.publish_ns,
+            Rec::SensorStats(s) => s.publish_ns,
         }
     }
 
@@ -78,6 +84,7 @@ impl Rec {
             Rec::Stats(s) => j(s),
             Rec::Friction(s) => j(s),
             Rec::Status(s) => j(s),
+            Rec::SensorStats(s) => j(s),
         }
     }
 }

@@ -39,6 +39,9 @@ pub struct RdtSettings {
     pub late_ms: f64,
     /// Silent this long (ms): ask for the stream again.
     pub silence_ms: f64,
+    /// Local UDP port (0: any). A board restarted on the same port is the same client to the
+    /// device, which streams to one client and ignores others until stopped.
+    pub local_port: u16,
 }
 
 impl RdtSettings {
@@ -81,6 +84,7 @@ pub struct Receiver {
     rdt: SequenceTracker,
     lateness: Lateness,
     backwards_run: u32,
+    late_run: u32,
     resync_after: u32,
     last_rx_ns: u64,
     last_request_ns: u64,
@@ -102,12 +106,14 @@ impl Receiver {
     /// A socket connected to the device (nothing sent yet).
     pub fn connect(settings: &RdtSettings) -> Result<Self> {
         settings.validate()?;
-        let local: SocketAddr = if settings.address.is_ipv4() {
-            "0.0.0.0:0".parse().expect("literal")
+        let any: std::net::IpAddr = if settings.address.is_ipv4() {
+            std::net::Ipv4Addr::UNSPECIFIED.into()
         } else {
-            "[::]:0".parse().expect("literal")
+            std::net::Ipv6Addr::UNSPECIFIED.into()
         };
-        let socket = UdpSocket::bind(local).context("opening a UDP socket")?;
+        let local = SocketAddr::new(any, settings.local_port);
+        let socket = UdpSocket::bind(local)
+            .with_context(|| format!("opening a UDP socket on local port {}: is another client of the sensor running on it?", settings.local_port))?;
         socket
             .connect(settings.address)
             .with_context(|| format!("addressing the sensor at {}", settings.address))?;
@@ -123,6 +129,7 @@ impl Receiver {
             rdt: SequenceTracker::default(),
             lateness: Lateness::new(period_ns, 1_000_000_000),
             backwards_run: 0,
+            late_run: 0,
             resync_after: ((0.05 * settings.rate_hz) as u32).max(50),
             last_rx_ns: 0,
             last_request_ns: 0,
@@ -209,6 +216,10 @@ impl Receiver {
                 }
                 Verdict::Reordered => {
                     self.stats.rdt_reordered += 1;
+                    // Counted lost when its successor came: it was late, not lost.
+                    if self.rdt.judge(r.rdt_sequence) == Verdict::Reordered {
+                        self.stats.rdt_lost = self.stats.rdt_lost.saturating_sub(1);
+                    }
                     self.backwards_run += 1;
                     if self.backwards_run >= self.resync_after {
                         // The device started again (its sample count went back): follow it.
@@ -240,8 +251,16 @@ impl Receiver {
             }
             if excess > self.settings.late_ms * 1e6 {
                 self.stats.rdt_late += 1;
+                self.late_run += 1;
+                if self.late_run >= self.resync_after {
+                    // Every record late for 0.05 s: the device's clock jumped (it skipped
+                    // samples or restarted), not the network; measure from here again.
+                    self.lateness = Lateness::new(self.period_ns, 1_000_000_000);
+                    self.late_run = 0;
+                }
                 continue;
             }
+            self.late_run = 0;
             let six = self.settings.calibration.to_si(&r.counts);
             let w = self.settings.mounting.planar(&six);
             let saturated = r.counts.iter().any(|c| *c == i32::MAX || *c == i32::MIN);
@@ -366,6 +385,11 @@ pub struct RdtArgs {
     /// Ask for the stream again after this long without a datagram (ms).
     #[arg(long, default_value_t = 100.0)]
     pub silence_ms: f64,
+    /// Local UDP port to receive on (0: any free one). Give a fixed one to a supervised board:
+    /// a restarted board is then the same client to the device, which serves one client at a
+    /// time and would ignore a new one while it still streams to the old.
+    #[arg(long, default_value_t = 0)]
+    pub local_port: u16,
 }
 
 impl RdtArgs {
@@ -407,6 +431,7 @@ impl RdtArgs {
             rate_hz,
             late_ms: self.late_ms,
             silence_ms: self.silence_ms,
+            local_port: self.local_port,
         };
         s.validate()?;
         Ok(s)

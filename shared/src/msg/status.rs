@@ -60,7 +60,7 @@ pub struct SensorStats {
     pub rdt_bad_datagrams: u64,
     /// RDT: records received.
     pub rdt_records: u64,
-    /// RDT: records missing from the stream (gaps in `rdt_sequence`).
+    /// RDT: records missing from the stream (gaps in `rdt_sequence` not filled later).
     pub rdt_lost: u64,
     /// RDT: records received twice.
     pub rdt_repeated: u64,

@@ -109,6 +109,12 @@ impl<A: Copy + PartialEq> Device<A> {
         }
     }
 
+    /// Samples the device took without anyone seeing them (its clock ran while its host
+    /// stalled): `ft_sequence` moves on by `n`, as a device's counter follows time.
+    pub fn skip(&mut self, n: u32) {
+        self.ft_sequence = self.ft_sequence.wrapping_add(n);
+    }
+
     /// One internal sample (raw counts, before the bias; the status word): the records to send
     /// now and to whom (none between a buffered stream's datagrams, or when not streaming).
     pub fn sample(&mut self, raw: [i32; 6], status: u32) -> Option<(A, &[Record])> {
