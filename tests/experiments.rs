@@ -195,3 +195,51 @@ fn rotation_centre_within_one_percent() {
     assert_passed("fig5.9", &out);
     assert!(out.summary.estimates.len() >= 5);
 }
+
+/// `afs experiment fig4.5 --seeds 1..6 --jobs 2 --json`: one report whose every check was run
+/// at the six seeds, with its pass rate and distribution (median ≤ p90 ≤ worst for an "at
+/// most" check), and the plot of the checks over the seeds; the same seeds one by one give the
+/// same figures.
+#[test]
+fn a_seed_sweep_reports_each_checks_distribution() {
+    let dir = std::env::temp_dir().join(format!("afs-sweep-{}", std::process::id()));
+    let out = Command::new(env!("CARGO_BIN_EXE_afs"))
+        .args([
+            "experiment",
+            "fig4.5",
+            "--seeds",
+            "1..6",
+            "--jobs",
+            "2",
+            "--json",
+        ])
+        .arg("--out")
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r: afs::tools::experiment::SweepReport = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!((r.seeds, r.jobs), ([1, 6], 2));
+    assert!(std::path::Path::new(&r.plot).is_file());
+    let mut worst = Vec::new();
+    for seed in 1..=6 {
+        let o = experiments::fig4_5(&Options {
+            seed,
+            ..Options::default()
+        })
+        .unwrap();
+        worst.push(o.checks);
+    }
+    for (i, c) in r.checks.iter().enumerate() {
+        assert_eq!(c.runs, 6, "{c:?}");
+        assert_eq!(c.passes, worst.iter().filter(|cs| cs[i].pass).count());
+        assert!(c.median <= c.p90 && c.p90 <= c.worst, "{c:?}");
+        let max = worst.iter().map(|cs| cs[i].value).fold(f64::MIN, f64::max);
+        assert_eq!(c.worst, max, "{c:?}");
+    }
+    let _ = std::fs::remove_dir_all(dir);
+}

@@ -120,6 +120,14 @@ enum Command {
         /// fig4.6: use the six trials printed in the thesis.
         #[arg(long)]
         thesis_table: bool,
+        /// Run at every seed of FIRST..LAST (inclusive) and report, per check, its pass rate
+        /// and the median, 90th percentile and worst of its figure; plots each check's figure
+        /// over the seeds (NAME_seeds.svg). Overrides --seed.
+        #[arg(long, value_name = "FIRST..LAST")]
+        seeds: Option<String>,
+        /// Threads for --seeds (default: one per CPU).
+        #[arg(long)]
+        jobs: Option<usize>,
         /// TOML file overriding the default set-up (plant, surface, sensor, servo); the
         /// experiment's own settings apply on top.
         #[arg(long)]
@@ -276,6 +284,8 @@ fn run() -> Result<ExitCode> {
             json,
             thesis_table,
             config,
+            seeds,
+            jobs,
         } => {
             let base = match &config {
                 Some(path) => afs::boards::load_config(path)?,
@@ -291,6 +301,34 @@ fn run() -> Result<ExitCode> {
             } else {
                 vec![name.as_str()]
             };
+            if let Some(range) = seeds {
+                let range = experiment::parse_seeds(&range)?;
+                let jobs = jobs.unwrap_or_else(afs::rt::available_cpus);
+                if jobs == 0 {
+                    anyhow::bail!("--jobs must be at least 1");
+                }
+                let stop = afs::boards::stop_flag()?;
+                let mut reports = Vec::new();
+                for n in names {
+                    let r = experiment::sweep(n, &opts, range.clone(), jobs, &out, &stop)?;
+                    if !json {
+                        show!(r);
+                    }
+                    reports.push(r);
+                }
+                if json {
+                    let text = match reports.as_slice() {
+                        [one] => serde_json::to_string_pretty(one)?,
+                        all => serde_json::to_string_pretty(all)?,
+                    };
+                    say!("{text}");
+                }
+                return Ok(if reports.iter().all(|r| r.passed) {
+                    ExitCode::SUCCESS
+                } else {
+                    ExitCode::from(1)
+                });
+            }
             let mut reports = Vec::new();
             let mut all_passed = true;
             for n in names {

@@ -28,6 +28,7 @@ pub mod servo;
 pub mod setups;
 pub mod sim;
 pub mod surface;
+pub mod sweep;
 pub mod tangent;
 pub mod ticks;
 pub mod tuner;
