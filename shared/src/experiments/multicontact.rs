@@ -152,7 +152,7 @@ pub fn fig5_9(opts: &Options) -> Result<Outcome<Fig59Summary>, ExperimentError> 
         trace: Vec::new(),
     };
     let tare = crate::sim::tare(&mut rig.sensor);
-    let (amp, freq, periods, ramp) = (0.5f64.to_radians(), 2.0, 2usize, 0.25);
+    let (amp, freq, periods, ramp) = (0.5f64.to_radians(), 2.0, 4usize, 0.25);
     // Friction suppression during the estimation dithers: a 20 Hz rotational dither about P̂
     // keeps the contacts sliding (thesis §6.3: the two dithers superposed).
     let (supp_amp, supp_hz) = (0.5f64.to_radians(), 20.0);
