@@ -114,7 +114,7 @@ pub fn friction_id(opts: &Options) -> Result<Outcome<FrictionIdSummary>, Experim
         let cruise = distance / v;
         let ramp = v / accel;
         // F_v shows only at the fast levels: gather more cruise there.
-        let min_cruise = if v >= 0.04 { 40.0 } else { 2.0 };
+        let min_cruise = if v >= 0.04 { 80.0 } else { 2.0 };
         let pairs = ((min_cruise / (2.0 * cruise)).ceil() as usize).clamp(1, 100);
         // Re-zero the sensor after every block of about 6 s of cruise.
         let per_block = ((6.0 / (2.0 * cruise)).floor() as usize).max(1);
