@@ -93,11 +93,8 @@ fn stream(opts: &SensorOptions, stop: &AtomicBool) -> Result<SensorToolReport> {
         );
     }
     let node = ipc::node(&opts.prefix, "sensor-cli")?;
-    let publisher = ipc::wrench(&node)?
-        .publisher_builder()
-        .backpressure_strategy(ipc::BACKPRESSURE)
-        .create()
-        .context("wrench publisher (is a stack with this prefix running its own sensor?)")?;
+    let publisher = crate::boards::sensor::wrench_publisher(&node)
+        .context("is a stack with this prefix running its own sensor?")?;
     let mut recorder = opts.record.as_deref().map(Recorder::start).transpose()?;
     let mut rx = Receiver::connect(&opts.rdt)?;
     let addr = opts.rdt.address;

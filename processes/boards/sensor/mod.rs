@@ -7,14 +7,35 @@
 pub mod model;
 pub mod rdt;
 
+use crate::boards::Startup;
 use crate::ipc::{self, Svc};
 use crate::rt;
-use afs_shared::msg::{self, SensorSource, SensorStats};
+use afs_shared::msg::{self, SensorSource, SensorStats, WrenchSample};
 use afs_shared::sensor::SensorParams;
 use anyhow::{Context, Result};
 use iceoryx2::node::Node;
 use iceoryx2::port::publisher::Publisher;
 use std::sync::atomic::AtomicBool;
+
+/// The wrench publisher every source (and `afs sensor`) publishes on: a slow subscriber loses
+/// its oldest samples, it never blocks the board.
+pub fn wrench_publisher(node: &Node<Svc>) -> Result<Publisher<Svc, WrenchSample, ()>> {
+    ipc::wrench(node)?
+        .publisher_builder()
+        .backpressure_strategy(ipc::BACKPRESSURE)
+        .create()
+        .context("wrench publisher")
+}
+
+/// The board's real-time set-up (SCHED_FIFO, mlockall, pinning), stamped in its start-up
+/// report; what could not be had is printed as a warning.
+pub fn go_realtime(startup: &mut Startup, args: &SensorArgs) {
+    let rtr = rt::setup(args.priority, true, args.cpu);
+    startup.report.rt_ns = Startup::now();
+    for w in &rtr.warnings {
+        eprintln!("afs-sensor: warning: {w}");
+    }
+}
 
 /// Publishes the board's statistics every 0.1 s.
 pub struct StatsOut {

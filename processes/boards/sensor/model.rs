@@ -26,22 +26,14 @@ pub fn run(args: &SensorArgs, stop: &AtomicBool) -> Result<SensorSummary> {
         .buffer_size(64)
         .create()
         .context("plant subscriber")?;
-    let publisher = ipc::wrench(&node)?
-        .publisher_builder()
-        .backpressure_strategy(ipc::BACKPRESSURE)
-        .create()
-        .context("wrench publisher")?;
+    let publisher = super::wrench_publisher(&node)?;
     let mut stats = StatsOut::open(&node, SensorSource::Model)?;
     startup.open(&node)?;
     startup.report.ports_ns = Startup::now();
     let mut model = SensorModel::new(args.params, args.seed);
     let tare = afs_shared::sim::tare(&mut model);
     startup.report.prepared_ns = Startup::now();
-    let rtr = rt::setup(args.priority, true, args.cpu);
-    startup.report.rt_ns = Startup::now();
-    for w in &rtr.warnings {
-        eprintln!("afs-sensor: warning: {w}");
-    }
+    super::go_realtime(&mut startup, args);
     let period_ns = (1e9 / args.params.rate_hz).round() as u64;
     let warm = (0.01 * args.params.rate_hz).ceil() as usize;
     let epoch_ns = rt::monotonic_ns();

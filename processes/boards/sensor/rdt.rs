@@ -298,21 +298,13 @@ pub fn run_board(
     let mut startup = Startup::new(Board::Sensor, args.main_ns);
     let node = ipc::node(&args.prefix, Board::Sensor.name())?;
     startup.report.node_ns = Startup::now();
-    let publisher = ipc::wrench(&node)?
-        .publisher_builder()
-        .backpressure_strategy(ipc::BACKPRESSURE)
-        .create()
-        .context("wrench publisher")?;
+    let publisher = super::wrench_publisher(&node)?;
     let mut stats = StatsOut::open(&node, SensorSource::Rdt)?;
     startup.open(&node)?;
     startup.report.ports_ns = Startup::now();
     let mut rx = Receiver::connect(settings)?;
     startup.report.prepared_ns = Startup::now();
-    let rtr = rt::setup(args.priority, true, args.cpu);
-    startup.report.rt_ns = Startup::now();
-    for w in &rtr.warnings {
-        eprintln!("afs-sensor: warning: {w}");
-    }
+    super::go_realtime(&mut startup, args);
     let mut summary = SensorSummary::default();
     rx.request_stream();
     let mut polls = 0u64;
