@@ -126,7 +126,13 @@ fn main() -> ExitCode {
         )
     })();
     match result {
-        Ok(_) => ExitCode::SUCCESS,
+        Ok(s) => {
+            eprintln!(
+                "afs-netft: {} samples, {} datagrams sent, {} requests ({} ignored: another client's or not RDT)",
+                s.samples, s.datagrams, s.requests, s.ignored
+            );
+            ExitCode::SUCCESS
+        }
         Err(e) => {
             eprintln!("afs-netft: error: {e:#}");
             ExitCode::from(2)

@@ -202,11 +202,10 @@ impl Receiver {
             return Poll::Datagram;
         };
         let count = n / RECORD_LEN;
-        let last_ft = u32::from_be_bytes(
-            self.buf[(count - 1) * RECORD_LEN + 4..(count - 1) * RECORD_LEN + 8]
-                .try_into()
-                .expect("4 bytes"),
-        );
+        let last: &[u8; RECORD_LEN] = self.buf[(count - 1) * RECORD_LEN..n]
+            .try_into()
+            .expect("a whole record");
+        let last_ft = Record::decode(last).ft_sequence;
         for r in records {
             self.stats.rdt_records += 1;
             match self.ft.judge(r.ft_sequence) {
