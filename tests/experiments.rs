@@ -2,6 +2,7 @@
 //! writes its plot and JSON. Run in release: `cargo test --release`.
 
 use afs_shared::experiments::{self, Options};
+use afs_shared::setups::Rig;
 use std::process::Command;
 
 fn assert_passed<S>(name: &str, out: &experiments::Outcome<S>) {
@@ -56,6 +57,67 @@ fn friction_coefficient_from_trials() {
 fn oscillation_per_amplitude_matches_the_model() {
     let out = experiments::fig4_7(&Options::default()).unwrap();
     assert_passed("fig4.7", &out);
+}
+
+/// The friction law's own figures (4.1–4.4) agree with their closed forms and quadrature, and
+/// fig. 4.4's lockstep points with the exact cycle mean.
+#[test]
+fn friction_law_figures_match_closed_forms() {
+    let opts = Options::default();
+    assert_passed("fig4.1", &experiments::fig4_1(&opts).unwrap());
+    let f42 = experiments::fig4_2(&opts).unwrap();
+    assert_passed("fig4.2", &f42);
+    // With eq. 4.23 the curve's minimum is near 0.1 m/s (the Stribeck dip meets F_v·ẋ).
+    let v = f42.summary.minimum_velocity_m_per_s.unwrap();
+    assert!((0.05..0.2).contains(&v), "minimum at {v} m/s");
+    let f43 = experiments::fig4_3(&opts).unwrap();
+    assert_passed("fig4.3", &f43);
+    // The oscillation is not proportional to Aω (the thesis's statement): 32x the Aω gives
+    // well under 2x the σ.
+    assert!(f43.summary.std_growth < 2.0 && f43.summary.a_omega_ratio > 30.0);
+    assert_passed("fig4.4", &experiments::fig4_4(&opts).unwrap());
+}
+
+/// Slow tuning (figs. 4.9, 4.10): Aω passes ẋ_o, the mean friction falls near zero, the
+/// oscillation follows the amplitude and the normal force stays steady on afs's rig.
+#[test]
+fn slow_tuning_drives_the_mean_friction_near_zero() {
+    let opts = Options::default();
+    assert_passed("fig4.9", &experiments::fig4_9(&opts).unwrap());
+    assert_passed("fig4.10", &experiments::fig4_10(&opts).unwrap());
+}
+
+/// The thesis's rig (PID only, coupled point) shows what the thesis saw and afs's rig does not:
+/// the oscillation grows with the dither amplitude and the normal force swings.
+#[test]
+fn thesis_rig_shows_growth_and_normal_force_swings() {
+    let on = |rig: Rig| {
+        let mut base = afs_shared::sim::SimConfig::default();
+        rig.apply(&mut base).unwrap();
+        Options {
+            base,
+            rig,
+            ..Default::default()
+        }
+    };
+    let (afs_rig, thesis_rig) = (on(Rig::Afs), on(Rig::Thesis));
+    let a = experiments::fig4_7(&afs_rig).unwrap();
+    let t = experiments::fig4_7(&thesis_rig).unwrap();
+    assert_passed("fig4.7 thesis rig", &t);
+    assert!(
+        a.summary.growth_ratio < 1.2 && t.summary.growth_ratio >= 1.5,
+        "growth {} (afs) vs {} (thesis)",
+        a.summary.growth_ratio,
+        t.summary.growth_ratio
+    );
+    let a = experiments::fig4_10(&afs_rig).unwrap();
+    let t = experiments::fig4_10(&thesis_rig).unwrap();
+    assert!(
+        t.summary.normal_std_fraction > 3.0 * a.summary.normal_std_fraction,
+        "normal-force std {} (afs) vs {} (thesis)",
+        a.summary.normal_std_fraction,
+        t.summary.normal_std_fraction
+    );
 }
 
 /// Both tuners bring the mean friction below 25 % within 5 s, hold the normal force within
@@ -115,6 +177,37 @@ fn experiment_command_prints_json_and_writes_the_plot() {
     let plot = dir.join("fig4_6.svg");
     let svg = std::fs::read_to_string(&plot).unwrap();
     assert!(svg.contains("normal force F_N (N)") && svg.contains("tangential force F_t (N)"));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// `--rig thesis` names its plot after the rig and is refused where it is not defined.
+#[test]
+fn thesis_rig_option_is_reported_and_checked() {
+    let dir = std::env::temp_dir().join(format!("afs-rig-{}", std::process::id()));
+    let out = afs()
+        .args(["experiment", "fig4.3", "--rig", "thesis", "--json", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r: afs::tools::experiment::ExperimentReport = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(r.rig, Rig::Thesis);
+    assert!(r.plot.ends_with("fig4_3_thesis.svg") && dir.join("fig4_3_thesis.svg").exists());
+    let out = afs()
+        .args(["experiment", "tangent", "--rig", "thesis", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("friction experiments") && err.contains("without --rig"),
+        "{err}"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 

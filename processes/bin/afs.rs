@@ -8,6 +8,7 @@ use afs::supervisor;
 use afs::tools::experiment;
 use afs_shared::experiments::{NAMES, Options};
 use afs_shared::faults::FaultKind;
+use afs_shared::setups::Rig;
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
@@ -132,6 +133,11 @@ enum Command {
         /// experiment's own settings apply on top.
         #[arg(long)]
         config: Option<PathBuf>,
+        /// The rig: `afs` (decoupled operating point, inverse-dynamics and preload
+        /// feedforward) or `thesis` (PID joints only, at a coupled point; docs/model.md).
+        /// Applied on top of --config. The thesis rig is defined for the friction experiments.
+        #[arg(long, default_value = "afs", value_parser = ["afs", "thesis"])]
+        rig: String,
     },
     /// Print the byte layout of every message exchanged over iceoryx2 (docs/messages.md).
     Messages,
@@ -286,15 +292,19 @@ fn run() -> Result<ExitCode> {
             config,
             seeds,
             jobs,
+            rig,
         } => {
-            let base = match &config {
+            let mut base = match &config {
                 Some(path) => afs::boards::load_config(path)?,
                 None => Default::default(),
             };
+            let rig = Rig::parse(&rig).unwrap_or_default();
+            rig.apply(&mut base)?;
             let opts = Options {
                 seed,
                 thesis_table,
                 base,
+                rig,
             };
             let names: Vec<&str> = if name == "all" {
                 NAMES.to_vec()

@@ -5,6 +5,7 @@ use crate::tools::plot;
 use afs_shared::check::Check;
 use afs_shared::error::ExperimentError;
 use afs_shared::experiments::{self, Options, Outcome};
+use afs_shared::setups::Rig;
 use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
@@ -32,6 +33,8 @@ pub struct ExperimentReport {
     pub experiment: String,
     /// Seed of the sensor noise and surface roughness.
     pub seed: u64,
+    /// The rig (`afs` or `thesis`).
+    pub rig: Rig,
     /// True when every check passes.
     pub passed: bool,
     /// The measured figures; their shape is the experiment's own.
@@ -64,14 +67,36 @@ impl fmt::Display for ExperimentReport {
     }
 }
 
+/// The plot's file name without extension: `fig4_7`, or `fig4_7_thesis` on the thesis rig.
+fn file_stem(name: &str, rig: Rig) -> String {
+    let stem = name.replace('.', "_");
+    match rig {
+        Rig::Afs => stem,
+        other => format!("{stem}_{}", other.name()),
+    }
+}
+
 /// Runs experiment `name` without plotting it.
 fn compute(name: &str, opts: &Options) -> Result<Packed> {
+    if opts.rig != Rig::Afs && !experiments::FRICTION_NAMES.contains(&name) {
+        bail!(
+            "the {} rig is defined for the friction experiments ({}); run {name} without --rig",
+            opts.rig.name(),
+            experiments::FRICTION_NAMES.join(", ")
+        );
+    }
     Ok(match name {
         "friction-id" => pack(experiments::friction_id(opts))?,
+        "fig4.1" => pack(experiments::fig4_1(opts))?,
+        "fig4.2" => pack(experiments::fig4_2(opts))?,
+        "fig4.3" => pack(experiments::fig4_3(opts))?,
+        "fig4.4" => pack(experiments::fig4_4(opts))?,
         "fig4.5" => pack(experiments::fig4_5(opts))?,
         "fig4.6" => pack(experiments::fig4_6(opts))?,
         "fig4.7" => pack(experiments::fig4_7(opts))?,
         "fig4.8" => pack(experiments::fig4_8(opts))?,
+        "fig4.9" => pack(experiments::fig4_9(opts))?,
+        "fig4.10" => pack(experiments::fig4_10(opts))?,
         "tangent" => pack(experiments::tangent(opts))?,
         "fig5.6" => pack(experiments::fig5_6(opts))?,
         "corners" => pack(experiments::corners(opts))?,
@@ -93,12 +118,13 @@ pub fn run(name: &str, opts: &Options, out_dir: &Path) -> Result<ExperimentRepor
     let packed = compute(name, opts)?;
     let wall = started.elapsed().as_secs_f64();
     let cpu = crate::procfs::cpu_seconds() - cpu0;
-    let file = out_dir.join(format!("{}.svg", name.replace('.', "_")));
+    let file = out_dir.join(format!("{}.svg", file_stem(name, opts.rig)));
     plot::render(&packed.figure, &file)?;
     let passed = afs_shared::check::all_pass(&packed.checks);
     Ok(ExperimentReport {
         experiment: name.to_string(),
         seed: opts.seed,
+        rig: opts.rig,
         passed,
         summary: packed.summary,
         checks: packed.checks,
@@ -163,6 +189,8 @@ pub struct SweepReport {
     pub experiment: String,
     /// First and last seed (inclusive).
     pub seeds: [u64; 2],
+    /// The rig (`afs` or `thesis`).
+    pub rig: Rig,
     /// Threads used.
     pub jobs: usize,
     /// True when every check passed at every seed.
@@ -295,11 +323,12 @@ pub fn sweep(
     let runs_wall_s: f64 = results.iter().map(|r| r.2).sum();
     let runs: Vec<(u64, Vec<Check>)> = results.into_iter().map(|(s, c, _)| (s, c)).collect();
     let checks = afs_shared::sweep::summarize(&runs);
-    let file = out_dir.join(format!("{}_seeds.svg", name.replace('.', "_")));
+    let file = out_dir.join(format!("{}_seeds.svg", file_stem(name, opts.rig)));
     plot::render(&afs_shared::sweep::figure(name, &runs, &checks), &file)?;
     Ok(SweepReport {
         experiment: name.to_string(),
         seeds: [first, last],
+        rig: opts.rig,
         jobs,
         passed: checks.iter().all(|c| c.passes == c.runs),
         checks,

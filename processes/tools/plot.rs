@@ -64,7 +64,7 @@ pub fn render(figure: &Figure, path: &Path) -> Result<()> {
             let mut chart = builder.build_cartesian_2d((x0..x1).log_scale(), y0..y1)?;
             chart
                 .configure_mesh()
-                .x_desc(&figure.x_label)
+                .x_desc(panel.x_label.as_deref().unwrap_or(&figure.x_label))
                 .y_desc(&panel.y_label)
                 .draw()?;
             draw_series(&mut chart, panel, true)?;
@@ -72,7 +72,7 @@ pub fn render(figure: &Figure, path: &Path) -> Result<()> {
             let mut chart = builder.build_cartesian_2d(x0..x1, y0..y1)?;
             chart
                 .configure_mesh()
-                .x_desc(&figure.x_label)
+                .x_desc(panel.x_label.as_deref().unwrap_or(&figure.x_label))
                 .y_desc(&panel.y_label)
                 .draw()?;
             draw_series(&mut chart, panel, false)?;

@@ -340,6 +340,7 @@ pub fn figure(recording: &Path) -> Result<afs_shared::experiments::Figure> {
         log_x: false,
         panels: vec![
             Panel {
+                x_label: None,
                 y_label: "normal force (N)".into(),
                 series: vec![
                     line("measured", pick(servo, &|m| num(m, "normal_force_n"))),
@@ -347,6 +348,7 @@ pub fn figure(recording: &Path) -> Result<afs_shared::experiments::Figure> {
                 ],
             },
             Panel {
+                x_label: None,
                 y_label: "tangential force (N)".into(),
                 series: vec![line(
                     "measured",
@@ -354,6 +356,7 @@ pub fn figure(recording: &Path) -> Result<afs_shared::experiments::Figure> {
                 )],
             },
             Panel {
+                x_label: None,
                 y_label: "position along the surface (mm)".into(),
                 series: vec![line(
                     "contact u",
@@ -361,6 +364,7 @@ pub fn figure(recording: &Path) -> Result<afs_shared::experiments::Figure> {
                 )],
             },
             Panel {
+                x_label: None,
                 y_label: "tip height (mm)".into(),
                 series: vec![
                     line("tip", pick(plant, &|m| idx(m, "tip_m", 1).map(|y| y * 1e3))),
@@ -371,6 +375,7 @@ pub fn figure(recording: &Path) -> Result<afs_shared::experiments::Figure> {
                 ],
             },
             Panel {
+                x_label: None,
                 y_label: "dither Aω (mm/s)".into(),
                 series: vec![line(
                     "commanded",

@@ -207,6 +207,28 @@ pub fn grid_then_golden(
     }
 }
 
+/// Pearson correlation of the pairs `(x, y)`; NaN with fewer than two pairs or a constant
+/// coordinate.
+pub fn correlation(pairs: &[[f64; 2]]) -> f64 {
+    let n = pairs.len() as f64;
+    if pairs.len() < 2 {
+        return f64::NAN;
+    }
+    let mx = pairs.iter().map(|p| p[0]).sum::<f64>() / n;
+    let my = pairs.iter().map(|p| p[1]).sum::<f64>() / n;
+    let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
+    for p in pairs {
+        let (dx, dy) = (p[0] - mx, p[1] - my);
+        sxy += dx * dy;
+        sxx += dx * dx;
+        syy += dy * dy;
+    }
+    if sxx == 0.0 || syy == 0.0 {
+        return f64::NAN;
+    }
+    sxy / (sxx * syy).sqrt()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -255,5 +277,14 @@ mod tests {
             assert!(w > -std::f64::consts::PI - 1e-12 && w <= std::f64::consts::PI + 1e-12);
             assert!(((a - w) / std::f64::consts::TAU).fract().abs() < 1e-9);
         }
+    }
+
+    /// Hand-computed: x = 1, 2, 3, y = 1, 3, 2 has Sxy = 1, Sxx = Syy = 2, r = 0.5.
+    #[test]
+    fn correlation_matches_hand_computation() {
+        assert!((correlation(&[[1.0, 1.0], [2.0, 3.0], [3.0, 2.0]]) - 0.5).abs() < 1e-15);
+        assert!((correlation(&[[0.0, 1.0], [1.0, -1.0]]) + 1.0).abs() < 1e-15);
+        assert!(correlation(&[[1.0, 1.0]]).is_nan());
+        assert!(correlation(&[[1.0, 1.0], [1.0, 2.0]]).is_nan());
     }
 }

@@ -169,6 +169,7 @@ pub fn figure(experiment: &str, runs: &[(u64, Vec<Check>)], sweeps: &[CheckSweep
         x_label: "seed".into(),
         log_x: false,
         panels: vec![Panel {
+            x_label: None,
             y_label: "figure / limit".into(),
             series,
         }],

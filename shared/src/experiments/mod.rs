@@ -7,20 +7,28 @@
 //! | name          | thesis            | what                                                          |
 //! |---------------|-------------------|---------------------------------------------------------------|
 //! | `friction-id` | eq. 4.23          | constant-velocity strokes, eq. 4.5 identified                  |
+//! | `fig4.1`      | fig. 4.1          | eq. 4.5's components: static, kinetic, Stribeck, viscous       |
+//! | `fig4.2`      | fig. 4.2          | eq. 4.5 against velocity and its minimum                       |
+//! | `fig4.3`      | fig. 4.3, eq. 4.9 | friction under a pure dither, zero mean                        |
+//! | `fig4.4`      | fig. 4.4, eq. 4.11| mean friction against nominal velocity under a dither          |
 //! | `fig4.5`      | fig. 4.5          | the same traverse without and with a fixed dither              |
 //! | `fig4.6`      | fig. 4.6          | μ from normal/tangential force trials                          |
 //! | `fig4.7`      | fig. 4.7          | dither amplitude raised step-wise, oscillation per step        |
-//! | `fig4.8`      | figs. 4.8–4.10    | on-line tuning from Aω = 0.2 ẋ_o, thesis tuner vs cost tuner   |
+//! | `fig4.8`      | fig. 4.8          | on-line tuning from Aω = 0.2 ẋ_o, thesis tuner vs cost tuner   |
+//! | `fig4.9`      | fig. 4.9          | slow tuning: the mean friction as Aω passes ẋ_o                |
+//! | `fig4.10`     | fig. 4.10         | slow tuning: amplitude, oscillation and normal force           |
 //! | `tangent`     | §5.3, eqs. 5.6–5.10, 6.1 | tangent estimate against α0, noise, friction, dither    |
 //! | `fig5.3`      | fig. 5.3          | the preliminary correlation method vs the dither method        |
 //! | `fig5.6`      | fig. 5.6          | tracking an unknown sinusoidal surface                         |
 //! | `corners`     | §5.2, §7.2        | tracking a piecewise-linear surface through its corners        |
 //! | `fig5.9`      | figs. 5.9, 5.10   | a box rotated into a corner about its estimated rotation centre |
 
+mod curves;
 mod friction;
 mod multicontact;
 mod tracking;
 
+pub use curves::*;
 pub use friction::*;
 pub use multicontact::*;
 pub use tracking::*;
@@ -39,6 +47,8 @@ pub struct Options {
     pub base: SimConfig,
     /// `fig4.6` only: use the six trials printed in the thesis instead of simulating.
     pub thesis_table: bool,
+    /// The rig `base` was set up as (already applied to `base`; kept for reports).
+    pub rig: crate::setups::Rig,
 }
 
 impl Default for Options {
@@ -47,22 +57,44 @@ impl Default for Options {
             seed: 1,
             base: SimConfig::default(),
             thesis_table: false,
+            rig: crate::setups::Rig::Afs,
         }
     }
 }
 
 /// The experiment names, in the order the README lists them.
-pub const NAMES: [&str; 10] = [
+pub const NAMES: [&str; 16] = [
     "friction-id",
+    "fig4.1",
+    "fig4.2",
+    "fig4.3",
+    "fig4.4",
     "fig4.5",
     "fig4.6",
     "fig4.7",
     "fig4.8",
+    "fig4.9",
+    "fig4.10",
     "tangent",
     "fig5.3",
     "fig5.6",
     "corners",
     "fig5.9",
+];
+
+/// The experiments of the thesis's chapter 4 (friction), which `--rig thesis` applies to.
+pub const FRICTION_NAMES: [&str; 11] = [
+    "friction-id",
+    "fig4.1",
+    "fig4.2",
+    "fig4.3",
+    "fig4.4",
+    "fig4.5",
+    "fig4.6",
+    "fig4.7",
+    "fig4.8",
+    "fig4.9",
+    "fig4.10",
 ];
 
 /// One data series of a plot.
@@ -79,6 +111,9 @@ pub struct Series {
 /// One panel (shared x axis).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Panel {
+    /// This panel's own x-axis label where its x is not the figure's (None: the figure's).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub x_label: Option<String>,
     /// Y-axis label with unit.
     pub y_label: String,
     /// Data.

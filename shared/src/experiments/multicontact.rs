@@ -283,6 +283,7 @@ pub fn fig5_9(opts: &Options) -> Result<Outcome<Fig59Summary>, ExperimentError> 
         log_x: false,
         panels: vec![
             Panel {
+                x_label: None,
                 y_label: "rotation centre x (mm)".into(),
                 series: vec![
                     series(
@@ -306,6 +307,7 @@ pub fn fig5_9(opts: &Options) -> Result<Outcome<Fig59Summary>, ExperimentError> 
                 ],
             },
             Panel {
+                x_label: None,
                 y_label: "rotation centre y (mm)".into(),
                 series: vec![
                     series(
@@ -329,6 +331,7 @@ pub fn fig5_9(opts: &Options) -> Result<Outcome<Fig59Summary>, ExperimentError> 
                 ],
             },
             Panel {
+                x_label: None,
                 y_label: "error / box size (%)".into(),
                 series: vec![markers(
                     "estimated",
@@ -339,6 +342,7 @@ pub fn fig5_9(opts: &Options) -> Result<Outcome<Fig59Summary>, ExperimentError> 
                 )],
             },
             Panel {
+                x_label: None,
                 y_label: "box tilt (deg)".into(),
                 series: vec![series(
                     "tilt",

@@ -285,6 +285,7 @@ pub fn tangent(opts: &Options) -> Result<Outcome<TangentSummary>, ExperimentErro
         log_x: false,
         panels: vec![
             Panel {
+                x_label: None,
                 y_label: "error of the estimate (deg)".into(),
                 series: cases
                     .iter()
@@ -292,6 +293,7 @@ pub fn tangent(opts: &Options) -> Result<Outcome<TangentSummary>, ExperimentErro
                     .collect(),
             },
             Panel {
+                x_label: None,
                 y_label: "thesis eq. 5.8 on RMS: error (deg)".into(),
                 series: cases
                     .iter()
@@ -355,14 +357,17 @@ pub(crate) fn run_tracking(
 fn tracking_figure(title: String, runs: &[(&str, &TrackingRun)]) -> Figure {
     let mut panels = vec![
         Panel {
+            x_label: None,
             y_label: "tangent angle (deg)".into(),
             series: vec![],
         },
         Panel {
+            x_label: None,
             y_label: "tangent error (deg)".into(),
             series: vec![],
         },
         Panel {
+            x_label: None,
             y_label: "normal force (N)".into(),
             series: vec![],
         },
