@@ -120,6 +120,19 @@ fn thesis_rig_shows_growth_and_normal_force_swings() {
     );
 }
 
+/// On a turning surface the servo follows the drift form of eq. 5.10's RLS more closely than
+/// the batch estimate, and exponential forgetting lags behind both.
+#[test]
+fn recursive_estimate_follows_a_turning_surface() {
+    let out = experiments::rls(&Options::default()).unwrap();
+    assert_passed("rls", &out);
+    let runs = &out.summary.runs;
+    assert_eq!(runs.len(), 3);
+    let (batch, forgetting, drift) = (&runs[0], &runs[1], &runs[2]);
+    assert!(drift.tracking_rms_error_deg < batch.tracking_rms_error_deg);
+    assert!(forgetting.tracking_rms_error_deg > batch.tracking_rms_error_deg);
+}
+
 /// Both tuners bring the mean friction below 25 % within 5 s, hold the normal force within
 /// ±10 % after 0.5 s and never lose contact; the JSON explains where each settles.
 #[test]

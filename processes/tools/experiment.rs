@@ -98,6 +98,7 @@ fn compute(name: &str, opts: &Options) -> Result<Packed> {
         "fig4.9" => pack(experiments::fig4_9(opts))?,
         "fig4.10" => pack(experiments::fig4_10(opts))?,
         "tangent" => pack(experiments::tangent(opts))?,
+        "rls" => pack(experiments::rls(opts))?,
         "fig5.6" => pack(experiments::fig5_6(opts))?,
         "corners" => pack(experiments::corners(opts))?,
         "fig5.3" => pack(experiments::fig5_3(opts))?,

@@ -209,6 +209,12 @@ impl Plant {
         &self.surface
     }
 
+    /// Moves the surface (a turntable, a part pushed by something else): the next step sees
+    /// `surface`. The presliding states are kept, so the move must be small per step.
+    pub fn set_surface(&mut self, surface: Surface) {
+        self.surface = surface;
+    }
+
     /// Truth at the start of the last step (forces and accelerations from that step).
     pub fn truth(&self) -> &PlantTruth {
         &self.truth

@@ -144,9 +144,15 @@ mod tests {
     #[test]
     fn thesis_rig_is_coupled_and_keeps_the_task_frame() {
         let (m12, share, cross) = coupling(Rig::Afs);
-        assert!(m12.abs() < 1e-3 && share < 1e-3 && cross.abs() < 1e-3, "{m12} {share} {cross}");
+        assert!(
+            m12.abs() < 1e-3 && share < 1e-3 && cross.abs() < 1e-3,
+            "{m12} {share} {cross}"
+        );
         let (m12, share, cross) = coupling(Rig::Thesis);
-        assert!(m12.abs() > 0.3 && share > 0.3 && cross.abs() < 1e-3, "{m12} {share} {cross}");
+        assert!(
+            m12.abs() > 0.3 && share > 0.3 && cross.abs() < 1e-3,
+            "{m12} {share} {cross}"
+        );
         let mut cfg = SimConfig::default();
         Rig::Thesis.apply(&mut cfg).unwrap();
         assert!(!cfg.servo.inertia_feedforward && !cfg.servo.preload_feedforward);

@@ -276,6 +276,11 @@ impl Lockstep {
         &self.plant
     }
 
+    /// Moves the surface in the world ([`Plant::set_surface`]).
+    pub fn set_surface(&mut self, surface: Surface) {
+        self.plant.set_surface(surface);
+    }
+
     /// The world truth of the last step.
     pub fn truth(&self) -> &PlantTruth {
         self.plant.truth()

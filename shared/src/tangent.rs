@@ -918,6 +918,9 @@ pub struct TangentRls {
     p: [[f64; 2]; 2],
     p_max: f64,
     forgetting: f64,
+    /// Random walk of the tangent angle per update (rad) over the force noise (N), for the
+    /// drift form; 0 for exponential forgetting only.
+    drift: f64,
     updates: usize,
 }
 
@@ -931,8 +934,31 @@ impl TangentRls {
             p: [[p0, 0.0], [0.0, p0]],
             p_max: 2.0 * p0,
             forgetting: forgetting.clamp(0.5, 1.0),
+            drift: 0.0,
             updates: 0,
         }
+    }
+
+    /// The drift form: no exponential forgetting; instead, before each update the angle of
+    /// `k n` may have moved by a random walk of `angle_drift_rad` (standard deviation per
+    /// update), against force noise `force_noise_n` (standard deviation of an in-phase force).
+    /// This is a Kalman filter whose process noise lies only along the angle (`q = (k σ_a/σ_f)²`
+    /// on the direction perpendicular to `k n`), so the stiffness k keeps its whole history while
+    /// the angle follows a turning surface. Exponential forgetting fades k as well, and because
+    /// the probes excite the normal direction only weakly (the measured normal motion is a few
+    /// percent of the stroke), a forgotten k drags the angle (docs/surface-tracking.md §5).
+    pub fn with_drift(
+        p0: f64,
+        tangent_angle: f64,
+        k0: f64,
+        angle_drift_rad: f64,
+        force_noise_n: f64,
+    ) -> Self {
+        let mut f = Self::new(1.0, p0, tangent_angle, k0);
+        if angle_drift_rad.is_finite() && force_noise_n.is_finite() && force_noise_n > 0.0 {
+            f.drift = angle_drift_rad.abs() / force_noise_n;
+        }
+        f
     }
 
     /// Adds one probe: in-phase tip displacement (world, m) and in-phase normal force (N).
@@ -940,6 +966,19 @@ impl TangentRls {
         if !(displacement.x.is_finite() && displacement.y.is_finite() && force_in_phase.is_finite())
         {
             return;
+        }
+        if self.drift > 0.0 {
+            // Process noise along the angle: the direction perpendicular to k n.
+            let k = self.theta[0].hypot(self.theta[1]);
+            if k > 0.0 {
+                let u = [-self.theta[1] / k, self.theta[0] / k];
+                let q = (k * self.drift).powi(2);
+                for i in 0..2 {
+                    for j in 0..2 {
+                        self.p[i][j] += q * u[i] * u[j];
+                    }
+                }
+            }
         }
         let phi = [-displacement.x, -displacement.y];
         let p = self.p;
@@ -1315,6 +1354,39 @@ mod tests {
             ),
             "{out:?}"
         );
+    }
+
+    /// Probes as the servo makes them: strokes 5° and 10° off the estimate, the measured
+    /// normal motion a tenth of the commanded one (the servo gives way to the stiff contact),
+    /// the stiffness varying ±3 % from record to record, the surface turning 0.2° per record
+    /// and the estimate following the filter. The drift form lags by less than one record's
+    /// turn; exponential forgetting, which also forgets k, lags several times more.
+    #[test]
+    fn drift_form_follows_a_turning_surface_that_forgetting_lags() {
+        let run = |mut f: TangentRls| -> f64 {
+            let mut theta = 0.0f64;
+            let mut worst = 0.0f64;
+            for record in 0..40 {
+                theta += 0.2f64.to_radians();
+                let k = 8800.0 * (1.0 + 0.03 * ((record * 7 % 5) as f64 - 2.0) / 2.0);
+                let base = f.tangent_angle();
+                let (t, n) = (unit(theta), perp(unit(theta)));
+                for off in [5.0f64, 10.0] {
+                    let across = (base + off.to_radians() - theta).sin();
+                    let d = t * 7.7e-4 + n * (7.7e-4 * across * 0.1);
+                    f.update(d, -k * n.dot(&d));
+                }
+                if record >= 10 {
+                    worst = worst.max((f.tangent_angle() - theta).abs());
+                }
+            }
+            worst.to_degrees()
+        };
+        let drift = run(TangentRls::with_drift(1e12, 0.0, 8800.0, 0.1f64.to_radians(), 0.003));
+        let forgetting = run(TangentRls::new(0.7, 1e12, 0.0, 8800.0));
+        // Measured: 0.16° (lag under one record's turn) against 1.09°.
+        assert!(drift < 0.25, "drift form {drift}°");
+        assert!(forgetting > 4.0 * drift, "forgetting {forgetting}° vs drift {drift}°");
     }
 
     /// The recursive form converges to a fixed slope and follows a slowly turning one.

@@ -18,6 +18,7 @@
 //! | `fig4.9`      | fig. 4.9          | slow tuning: the mean friction as Aω passes ẋ_o                |
 //! | `fig4.10`     | fig. 4.10         | slow tuning: amplitude, oscillation and normal force           |
 //! | `tangent`     | §5.3, eqs. 5.6–5.10, 6.1 | tangent estimate against α0, noise, friction, dither    |
+//! | `rls`         | eq. 5.10          | a turning surface followed on the batch vs the recursive estimate |
 //! | `fig5.3`      | fig. 5.3          | the preliminary correlation method vs the dither method        |
 //! | `fig5.6`      | fig. 5.6          | tracking an unknown sinusoidal surface                         |
 //! | `corners`     | §5.2, §7.2        | tracking a piecewise-linear surface through its corners        |
@@ -26,11 +27,13 @@
 mod curves;
 mod friction;
 mod multicontact;
+mod recursive;
 mod tracking;
 
 pub use curves::*;
 pub use friction::*;
 pub use multicontact::*;
+pub use recursive::*;
 pub use tracking::*;
 
 pub use crate::check::Check;
@@ -63,7 +66,7 @@ impl Default for Options {
 }
 
 /// The experiment names, in the order the README lists them.
-pub const NAMES: [&str; 16] = [
+pub const NAMES: [&str; 17] = [
     "friction-id",
     "fig4.1",
     "fig4.2",
@@ -76,6 +79,7 @@ pub const NAMES: [&str; 16] = [
     "fig4.9",
     "fig4.10",
     "tangent",
+    "rls",
     "fig5.3",
     "fig5.6",
     "corners",
