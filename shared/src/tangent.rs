@@ -1382,11 +1382,20 @@ mod tests {
             }
             worst.to_degrees()
         };
-        let drift = run(TangentRls::with_drift(1e12, 0.0, 8800.0, 0.1f64.to_radians(), 0.003));
+        let drift = run(TangentRls::with_drift(
+            1e12,
+            0.0,
+            8800.0,
+            0.1f64.to_radians(),
+            0.003,
+        ));
         let forgetting = run(TangentRls::new(0.7, 1e12, 0.0, 8800.0));
         // Measured: 0.16° (lag under one record's turn) against 1.09°.
         assert!(drift < 0.25, "drift form {drift}°");
-        assert!(forgetting > 4.0 * drift, "forgetting {forgetting}° vs drift {drift}°");
+        assert!(
+            forgetting > 4.0 * drift,
+            "forgetting {forgetting}° vs drift {drift}°"
+        );
     }
 
     /// The recursive form converges to a fixed slope and follows a slowly turning one.
