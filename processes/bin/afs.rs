@@ -135,7 +135,8 @@ enum Command {
         config: Option<PathBuf>,
         /// The rig: `afs` (decoupled operating point, inverse-dynamics and preload
         /// feedforward) or `thesis` (PID joints only, at a coupled point; docs/model.md).
-        /// Applied on top of --config. The thesis rig is defined for the friction experiments.
+        /// Applied on top of --config. The thesis rig is defined for the friction experiments
+        /// (with `all`, only those run).
         #[arg(long, default_value = "afs", value_parser = ["afs", "thesis"])]
         rig: String,
     },
@@ -306,7 +307,10 @@ fn run() -> Result<ExitCode> {
                 base,
                 rig,
             };
-            let names: Vec<&str> = if name == "all" {
+            let names: Vec<&str> = if name == "all" && rig != Rig::Afs {
+                // The thesis's rig is defined for the friction experiments only.
+                afs_shared::experiments::FRICTION_NAMES.to_vec()
+            } else if name == "all" {
                 NAMES.to_vec()
             } else {
                 vec![name.as_str()]
