@@ -58,6 +58,20 @@ pub fn config(prefix: &str) -> Result<Config> {
     Ok(c)
 }
 
+/// The iceoryx2 config of stack `prefix` as the TOML file iceoryx2 reads: with it in
+/// `config/iceoryx2.toml` of the working directory (or `~/.config/iceoryx2/iceoryx2.toml`), the
+/// upstream `iox2` CLI and any iceoryx2 program see the stack's nodes and services.
+pub fn config_toml(prefix: &str) -> Result<String> {
+    let c = config(prefix)?;
+    let body = toml::to_string_pretty(&c).context("writing the iceoryx2 config as TOML")?;
+    Ok(format!(
+        "# iceoryx2 config of the afs stack with prefix '{prefix}' (afs iox2-config --prefix {prefix}).\n\
+         # iceoryx2 reads ./config/iceoryx2.toml, then ~/.config/iceoryx2/iceoryx2.toml, then\n\
+         # /etc/iceoryx2/iceoryx2.toml; the stack's files are named {}*.\n{body}",
+        file_prefix(prefix)
+    ))
+}
+
 /// A node of stack `prefix` named `name`; iceoryx2's own signal handling is off (the
 /// processes handle SIGINT/SIGTERM themselves).
 pub fn node(prefix: &str, name: &str) -> Result<Node<Svc>> {

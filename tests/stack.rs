@@ -106,6 +106,38 @@ fn a_running_stack_serves_clients_and_keeps_its_prefix() {
     let m = v["mean_force_magnitude_n"].as_f64().unwrap();
     assert!(m > 2.0 && m < 5.0, "mean force {m} N");
 
+    // The iceoryx2 config `afs iox2-config` writes lets any iceoryx2 program (the upstream
+    // iox2 CLI reads ./config/iceoryx2.toml) see this stack's nodes.
+    let cfg_dir = dir.join("iox2");
+    let w = afs()
+        .args(["iox2-config", "--prefix", &p, "--write"])
+        .arg(&cfg_dir)
+        .output()
+        .unwrap();
+    assert!(w.status.success(), "{}", String::from_utf8_lossy(&w.stderr));
+    let file = cfg_dir.join("config/iceoryx2.toml");
+    let printed = afs()
+        .args(["iox2-config", "--prefix", &p])
+        .output()
+        .unwrap();
+    assert_eq!(
+        String::from_utf8_lossy(&printed.stdout).trim_end(),
+        std::fs::read_to_string(&file).unwrap().trim_end()
+    );
+    let seen = nodes_seen_by(&file);
+    for board in ["servo", "sensor", "estimator"] {
+        assert!(
+            seen.iter().any(|n| n.contains(board)),
+            "{board} not among the nodes the written config sees: {seen:?}"
+        );
+    }
+    let bad = afs()
+        .args(["iox2-config", "--prefix", "no/slash"])
+        .output()
+        .unwrap();
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("invalid stack prefix"));
+
     // Same prefix: refused.
     let dup = afs()
         .args(["run", "--duration", "2", "--quiet", "--prefix", &p])
@@ -179,6 +211,26 @@ fn a_running_stack_serves_clients_and_keeps_its_prefix() {
     assert!(head.contains("normal_force_n") && head.contains("set_point_m[1]"));
     assert_eq!(lines.count() as u64, rs.messages["/servo"]);
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The names of the live iceoryx2 nodes a program configured by `file` sees.
+fn nodes_seen_by(file: &Path) -> Vec<String> {
+    use iceoryx2::node::NodeView;
+    use iceoryx2::prelude::*;
+    let path = FilePath::new(file.to_str().unwrap().as_bytes()).unwrap();
+    let cfg =
+        iceoryx2::config::Config::from_file(&path).expect("afs iox2-config is a valid config");
+    let mut seen = Vec::new();
+    Node::<ipc::Service>::list(&cfg, |state| {
+        if let NodeState::Alive(v) = state
+            && let Some(d) = v.details()
+        {
+            seen.push(d.name().to_string());
+        }
+        CallbackProgression::Continue
+    })
+    .unwrap();
+    seen
 }
 
 /// Ctrl-C (SIGINT to the supervisor) stops the stack in order, reports what ran, and leaves

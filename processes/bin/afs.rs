@@ -9,7 +9,7 @@ use afs::tools::experiment;
 use afs_shared::experiments::{NAMES, Options};
 use afs_shared::faults::FaultKind;
 use afs_shared::setups::Rig;
-use anyhow::Result;
+use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -142,6 +142,19 @@ enum Command {
     },
     /// Print the byte layout of every message exchanged over iceoryx2 (docs/messages.md).
     Messages,
+    /// Print the iceoryx2 config that lets the upstream `iox2` CLI (iceoryx2-cli 0.10) and any
+    /// iceoryx2 program see a running stack, or write it as DIR/config/iceoryx2.toml
+    /// (docs/stack.md, *Inspecting a stack with iox2*).
+    #[command(name = "iox2-config")]
+    Iox2Config {
+        /// The stack's prefix.
+        #[arg(long, default_value = "afs")]
+        prefix: String,
+        /// Write DIR/config/iceoryx2.toml (iceoryx2 reads it from the working directory)
+        /// instead of printing the config.
+        #[arg(long, value_name = "DIR")]
+        write: Option<PathBuf>,
+    },
     /// Launch the process graph (servo, sensor, estimator) and run a scenario in real time.
     ///
     /// Ends with a summary (one JSON object with --json): the scenario's figures, the same
@@ -467,6 +480,27 @@ fn run() -> Result<ExitCode> {
             cpu,
         } => {
             afs::tools::bench::peer(&prefix, &socket, cpu)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Iox2Config { prefix, write } => {
+            let text = afs::ipc::config_toml(&prefix)?;
+            match write {
+                None => say!("{text}"),
+                Some(dir) => {
+                    let conf = dir.join("config");
+                    std::fs::create_dir_all(&conf)
+                        .with_context(|| format!("creating {}", conf.display()))?;
+                    let file = conf.join("iceoryx2.toml");
+                    std::fs::write(&file, text)
+                        .with_context(|| format!("writing {}", file.display()))?;
+                    say!(
+                        "wrote {}; run the iox2 CLI from {} (e.g. `cd {} && iox2 node list`)",
+                        file.display(),
+                        dir.display(),
+                        dir.display()
+                    );
+                }
+            }
             Ok(ExitCode::SUCCESS)
         }
         Command::Messages => {
