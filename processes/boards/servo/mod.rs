@@ -217,8 +217,10 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
         }
         let now = rt::monotonic_ns();
         let _ = plant_pub.update_connections();
+        // Judged against the clock at receipt, as in the loop below: the sensor board may
+        // publish between the clock read above and this receive.
         while let Ok(Some(s)) = wrench_sub.receive() {
-            gate.offer(s.payload(), now);
+            gate.offer(s.payload(), rt::monotonic_ns());
         }
         if let Ok((w, _)) = gate.current(now) {
             startup.report.input_ns = now;
