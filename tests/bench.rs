@@ -50,7 +50,14 @@ fn bench_all_reports_every_series() {
         ("loop", &["bare_loop_wake", "servo_wake"]),
         (
             "stack",
-            &["servo_wake", "force_age", "servo_wake_hog", "force_age_hog"],
+            &[
+                "servo_wake",
+                "force_age",
+                "servo_wake_hog",
+                "force_age_hog",
+                "servo_wake_viewer",
+                "force_age_viewer",
+            ],
         ),
     ];
     let parts = r.parts();
@@ -87,7 +94,19 @@ fn bench_all_reports_every_series() {
         h["afs_poll_rtt"].summary_us.count, h["unix_socket_rtt"].summary_us.count,
         "every hop series has the same sample count"
     );
-    for p in ["h", "l", "s0", "s1", "s2", "s3"] {
+    let s = r.stack.as_ref().unwrap();
+    assert!(s.runs.with_viewer.viewer && s.runs.with_viewer.stack_runs == 2);
+    assert!(
+        s.runs.viewer_messages > 0,
+        "the bench's Foxglove client received nothing"
+    );
+    assert!(
+        s.part
+            .targets
+            .iter()
+            .any(|t| t.name.contains("with a Foxglove client"))
+    );
+    for p in ["h", "l", "s0", "s1", "s2", "s3", "s4", "s5"] {
         let left = afs::ipc::leftovers(&format!("{prefix}{p}"));
         assert!(left.is_empty(), "{left:?}");
     }

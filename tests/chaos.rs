@@ -260,6 +260,8 @@ fn a_killed_supervisor_takes_its_boards_and_the_next_run_cleans_up() {
         libc::kill(run.id() as i32, libc::SIGKILL);
     }
     let _ = run.0.as_mut().unwrap().wait();
+    let setup = afs::supervisor::setup_dir(&p, run.id());
+    assert!(setup.exists(), "{setup:?}: the killed supervisor's set-up");
     let alive = afs::procfs::alive;
     let t0 = Instant::now();
     while boards.iter().any(|&b| alive(b)) {
@@ -287,6 +289,7 @@ fn a_killed_supervisor_takes_its_boards_and_the_next_run_cleans_up() {
     let r = run_report(&out);
     assert_passed(&out, &r);
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
+    assert!(!setup.exists(), "{setup:?} left");
 }
 
 /// The servo killed, frozen (SIGSTOP) and killed mid-probe: the stall policy finds the frozen

@@ -66,6 +66,14 @@ struct RunArgs {
     /// No progress line on stderr.
     #[arg(long)]
     quiet: bool,
+    /// Serve a live view to Foxglove or Lichtblick on HOST:PORT (default 127.0.0.1:8765;
+    /// port 0 picks a free one). The address is printed on stderr; open it with
+    /// examples/foxglove-layout.json.
+    #[arg(long, value_name = "HOST:PORT", num_args = 0..=1, default_missing_value = afs::tools::view::DEFAULT_ADDR)]
+    foxglove: Option<String>,
+    /// Rate of each high-rate stream in the live view (world, controller, force, /live), Hz.
+    #[arg(long, value_name = "HZ", default_value_t = 100.0)]
+    foxglove_hz: f64,
 }
 
 /// Runs a stack (with faults if `chaos` is set) and prints its summary.
@@ -75,6 +83,11 @@ fn run_stack(a: RunArgs, chaos: Option<supervisor::ChaosOptions>) -> Result<Exit
     {
         anyhow::bail!("--duration {d} must be a number of seconds ≥ 0");
     }
+    let foxglove = a
+        .foxglove
+        .as_deref()
+        .map(|addr| afs::tools::view::ViewSettings::parse(addr, a.foxglove_hz))
+        .transpose()?;
     let stop = afs::boards::stop_flag()?;
     let opts = supervisor::RunOptions {
         config: a.config,
@@ -85,6 +98,7 @@ fn run_stack(a: RunArgs, chaos: Option<supervisor::ChaosOptions>) -> Result<Exit
         record: a.record,
         progress: !a.quiet,
         chaos,
+        foxglove,
     };
     let report = supervisor::run(&opts, &stop)?;
     if a.json {
@@ -226,13 +240,34 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Attach a live view to a running stack: a Foxglove WebSocket server publishing its
+    /// topics (the recording's topics and schemas), until the stack ends or Ctrl-C.
+    ///
+    /// Reads the stack's streams like any subscriber (the supervisor's `--foxglove` reads
+    /// the samples it already has instead). Prints the address on stderr, and a summary at
+    /// the end (one JSON object with --json).
+    View {
+        /// The stack's prefix.
+        #[arg(long, default_value = "afs")]
+        prefix: String,
+        /// Address to serve on (port 0 picks a free one).
+        #[arg(long, value_name = "HOST:PORT", default_value = afs::tools::view::DEFAULT_ADDR)]
+        foxglove: String,
+        /// Rate of each high-rate stream (Hz).
+        #[arg(long, value_name = "HZ", default_value_t = 100.0)]
+        foxglove_hz: f64,
+        /// Print the summary as one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
     /// Measure latency and jitter against the machine's floor and the usual alternatives.
     ///
     /// hop: message round trip and one-way latency between two processes over iceoryx2 (afs's
     /// services, busy-poll and event wake-up; bare iceoryx2), against a shared-memory atomic
     /// ping-pong (the floor) and a Unix socket, in interleaved rounds. loop: the servo's wake
     /// latency against a bare absolute-time loop at the same priority on the same core, at the
-    /// same time. stack: force age at use and servo wake latency, without and with a CPU hog.
+    /// same time. stack: force age at use and servo wake latency, without and with a CPU hog, and with a
+    /// Foxglove client on the live view (their wake p99 ratio).
     /// Writes .hgrm histograms and SVG percentile plots into --out.
     Bench {
         /// hop, loop, stack or all.
@@ -401,6 +436,28 @@ fn run() -> Result<ExitCode> {
                     in_turn,
                 }),
             )
+        }
+        Command::View {
+            prefix,
+            foxglove,
+            foxglove_hz,
+            json,
+        } => {
+            let settings = afs::tools::view::ViewSettings::parse(&foxglove, foxglove_hz)?;
+            let stop = afs::boards::stop_flag()?;
+            let summary = afs::tools::view::attach(&prefix, settings, &stop)?;
+            if json {
+                say!("{}", serde_json::to_string_pretty(&summary)?);
+            } else {
+                say!(
+                    "live view {}: {} messages published, {} dropped, at most {} clients",
+                    summary.url,
+                    summary.published.values().sum::<u64>(),
+                    summary.dropped,
+                    summary.max_clients
+                );
+            }
+            Ok(ExitCode::SUCCESS)
         }
         Command::Status { prefix, json } => {
             let status = supervisor::status(&prefix, std::time::Duration::from_secs(2))?;

@@ -29,7 +29,7 @@ mod watch;
 
 pub use child::{ExitRecord, Timeline};
 pub use footprint::Footprint;
-pub use join::SampleCounts;
+pub use join::{Joiner, SampleCounts};
 pub use report::*;
 pub use stack::*;
 pub use status::*;
@@ -37,16 +37,48 @@ pub use status::*;
 use crate::chaos::{self, ChaosReport, Injector};
 use crate::ipc;
 use crate::tools::record::Recorder;
+use crate::tools::view::LiveView;
 use afs_shared::check::Check;
 use afs_shared::msg::{Board, FrictionStatus, ProcessState};
 use afs_shared::scenario::{self, Scenario, ScenarioKind};
 use anyhow::{Context, Result};
 use child::{Launch, Proc};
 use std::sync::atomic::AtomicBool;
-use watch::{Ports, Supervisor};
+use watch::{Ports, Sinks, Supervisor};
+
+/// How long observers of the stack (`afs view`, clients) get to close their nodes after the
+/// supervisor's Stopping status before the prefix is released and checked for leaks.
+const OBSERVER_GRACE: std::time::Duration = std::time::Duration::from_secs(3);
 
 /// The first contact's transient is not a fault's: the normal force counts from here (s).
 const FAULT_SETTLE_S: f64 = 0.5;
+
+/// The set-up directory of the supervisor `pid` of stack `prefix`.
+pub fn setup_dir(prefix: &str, pid: u32) -> std::path::PathBuf {
+    std::env::temp_dir().join(format!("afs-{prefix}-{pid}"))
+}
+
+/// Removes the set-up directories of the prefix's supervisors that are no longer alive
+/// (killed before they could remove their own).
+fn remove_dead_setups(prefix: &str) {
+    let head = format!("afs-{prefix}-");
+    let Ok(dir) = std::fs::read_dir(std::env::temp_dir()) else {
+        return;
+    };
+    for e in dir.flatten() {
+        let name = e.file_name();
+        let Some(pid) = name
+            .to_str()
+            .and_then(|n| n.strip_prefix(&head))
+            .and_then(|p| p.parse::<i32>().ok())
+        else {
+            continue;
+        };
+        if pid as u32 != std::process::id() && !crate::procfs::alive(pid) {
+            let _ = std::fs::remove_dir_all(e.path());
+        }
+    }
+}
 
 /// Runs a stack until its scenario ends, it is stopped, or it fails; returns its report.
 pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunReport> {
@@ -69,6 +101,20 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunReport> {
         .map(|c| chaos::plan(c, &stack, &scenario, duration))
         .transpose()?;
 
+    // The live view first: a port in use is refused before anything is set up.
+    let view = match opts.foxglove {
+        Some(v) => {
+            let tick_hz = 1.0 / scenario.cfg.servo.dt();
+            let lv = LiveView::start(v, Some(tick_hz), &format!("afs {prefix}"))?;
+            eprintln!(
+                "afs: live view at {} (open it in Foxglove with examples/foxglove-layout.json)",
+                lv.url()
+            );
+            Some(lv)
+        }
+        None => None,
+    };
+
     // The prefix must be free; a dead stack's leftovers are removed.
     let (cleaned, removed) = ipc::claim_prefix(&prefix)?;
     if cleaned > 0 || removed > 0 {
@@ -76,6 +122,9 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunReport> {
             "afs: removed the leftovers of a dead stack '{prefix}' ({cleaned} nodes, {removed} files)"
         );
     }
+
+    // A killed supervisor's set-up directory (below) is removed too.
+    remove_dead_setups(&prefix);
 
     // Shared memory the supervisor owns and reads.
     let node = ipc::node(&prefix, "supervisor")?;
@@ -85,7 +134,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunReport> {
     let ports = Ports::open(&node)?;
 
     // The set-up the boards read.
-    let dir = std::env::temp_dir().join(format!("afs-{prefix}-{}", std::process::id()));
+    let dir = setup_dir(&prefix, std::process::id());
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let sim_file = match &stack.sim {
         Some(t) => {
@@ -122,13 +171,13 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunReport> {
     };
 
     let mut sup = Supervisor::new(procs, launch, &scenario, duration, ports)
-        .recording(recorder)
+        .with_sinks(Sinks { recorder, view })
         .injecting(injector)
         .with_progress(opts.progress);
     let result = sup.run(stop);
     let wall_s = sup.shut_down();
     result?;
-    let record = sup.finish_recording()?;
+    let (record, view) = sup.finish_sinks()?;
     let chaos_report = sup.injector.take().map(|inj| {
         let mut records = inj.records().to_vec();
         for r in records.iter_mut().filter(|r| r.pid != 0) {
@@ -158,6 +207,13 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunReport> {
     let _ = std::fs::remove_dir_all(&dir);
     // Everything of the prefix must have gone with its nodes (iceoryx2's clean-up); what is
     // left is a leak, reported and failed below, not removed here.
+    // Observers told by the Stopping status get a moment to close their nodes first.
+    let t_release = std::time::Instant::now();
+    while ipc::census(&prefix, false).is_ok_and(|c| !c.alive.is_empty())
+        && t_release.elapsed() < OBSERVER_GRACE
+    {
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
     let left = ipc::release_prefix(&prefix).unwrap_or_else(|_| ipc::leftovers(&prefix));
 
     // The lockstep reference, going through the stack's events (≈ 300× real time).
@@ -263,6 +319,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunReport> {
             })
             .collect(),
         record,
+        view,
         cleanup: Cleanup {
             left: left.iter().map(|p| p.display().to_string()).collect(),
         },

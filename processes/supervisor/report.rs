@@ -329,6 +329,9 @@ pub struct RunReport {
     pub processes: Vec<ProcessReport>,
     /// The recording, if one was asked for.
     pub record: Option<RecordSummary>,
+    /// The live view, if one was asked for.
+    #[serde(default)]
+    pub view: Option<crate::tools::view::ViewSummary>,
     /// What was left.
     pub cleanup: Cleanup,
     /// Safety figures (safe-state latency, normal force, non-finite forces).

@@ -180,6 +180,8 @@ pub struct RunOptions {
     pub progress: bool,
     /// Inject faults (`afs chaos`).
     pub chaos: Option<ChaosOptions>,
+    /// Serve a live view to Foxglove.
+    pub foxglove: Option<crate::tools::view::ViewSettings>,
 }
 
 /// What `afs chaos` injects.

@@ -8,7 +8,8 @@ use super::join::Joiner;
 use crate::chaos::{Action, BoardView, Injector, ServoView};
 use crate::ipc::{self, Svc};
 use crate::rt;
-use crate::tools::record::{Rec, Recorder};
+use crate::tools::record::{Rec, RecordSummary, Recorder};
+use crate::tools::view::{self, LiveView, ViewSummary};
 use afs_shared::faults::FaultMonitor;
 use afs_shared::msg::{
     self, Board, BoardStartup, FrictionReport, LoopStats, PlantSample, ProcessState, ProcessStatus,
@@ -87,6 +88,31 @@ impl Ports {
     }
 }
 
+/// Where the supervisor's samples go besides its own checks: the recording and the live view.
+/// Neither can block the supervisor (both hand over through channels that drop when full).
+#[derive(Default)]
+pub struct Sinks {
+    /// The MCAP recording (`--record`).
+    pub recorder: Option<Recorder>,
+    /// The Foxglove view (`--foxglove`).
+    pub view: Option<LiveView>,
+}
+
+impl Sinks {
+    fn any(&self) -> bool {
+        self.recorder.is_some() || self.view.is_some()
+    }
+
+    fn push(&mut self, r: Rec) {
+        if let Some(x) = self.recorder.as_mut() {
+            x.push(r);
+        }
+        if let Some(v) = self.view.as_mut() {
+            v.push(r);
+        }
+    }
+}
+
 /// A running stack under watch.
 pub struct Supervisor<'a> {
     /// The processes of the graph.
@@ -95,7 +121,7 @@ pub struct Supervisor<'a> {
     duration: f64,
     /// The ports (the loop statistics are read once more after the stop).
     pub ports: Ports,
-    recorder: Option<Recorder>,
+    sinks: Sinks,
     /// The fault injector (`afs chaos`).
     pub injector: Option<Injector>,
     /// The scenario's figures from the samples.
@@ -151,7 +177,7 @@ impl<'a> Supervisor<'a> {
             launch,
             duration,
             ports,
-            recorder: None,
+            sinks: Sinks::default(),
             injector: None,
             monitor: scenario.monitor(),
             faults: FaultMonitor::new(scenario.cfg.servo.hybrid.preload_n, FAULT_SETTLE_S),
@@ -178,9 +204,9 @@ impl<'a> Supervisor<'a> {
         }
     }
 
-    /// Records every topic with `recorder`.
-    pub fn recording(self, recorder: Option<Recorder>) -> Self {
-        Self { recorder, ..self }
+    /// Records every topic and shows them live with `sinks`.
+    pub fn with_sinks(self, sinks: Sinks) -> Self {
+        Self { sinks, ..self }
     }
 
     /// Injects faults with `injector`.
@@ -269,9 +295,7 @@ impl<'a> Supervisor<'a> {
                 continue;
             }
             self.last_time_s = p.time_s;
-            if let Some(r) = self.recorder.as_mut() {
-                r.push(Rec::Plant(p));
-            }
+            self.sinks.push(Rec::Plant(p));
             self.joiner.push_plant(p);
         }
         while let Ok(Some(s)) = self.ports.servo.receive() {
@@ -280,9 +304,7 @@ impl<'a> Supervisor<'a> {
                 mode: ServoMode::try_from(v.mode).ok(),
                 started: v.estimations_started,
             };
-            if let Some(r) = self.recorder.as_mut() {
-                r.push(Rec::Servo(v));
-            }
+            self.sinks.push(Rec::Servo(v));
             self.joiner.push_servo(v);
         }
         self.pair();
@@ -301,9 +323,7 @@ impl<'a> Supervisor<'a> {
                     sn.data_flowing(now, rt::monotonic_ns());
                 }
             }
-            if let Some(r) = self.recorder.as_mut() {
-                r.push(Rec::Wrench(w));
-            }
+            self.sinks.push(Rec::Wrench(w));
         }
         while let Ok(Some(s)) = self.ports.startup.receive() {
             let r = *s.payload();
@@ -321,22 +341,16 @@ impl<'a> Supervisor<'a> {
         }
         while let Ok(Some(s)) = self.ports.sensor_stats.receive() {
             self.sensor_stats = Some(*s.payload());
-            if let Some(r) = self.recorder.as_mut() {
-                r.push(Rec::SensorStats(*s.payload()));
-            }
+            self.sinks.push(Rec::SensorStats(*s.payload()));
         }
         while let Ok(Some(s)) = self.ports.stats.receive() {
             self.stats = Some(*s.payload());
-            if let Some(r) = self.recorder.as_mut() {
-                r.push(Rec::Stats(*s.payload()));
-            }
+            self.sinks.push(Rec::Stats(*s.payload()));
         }
         while let Ok(Some(s)) = self.ports.friction.receive() {
             self.last_data[Board::Estimator as usize] = Instant::now();
             self.friction = Some(*s.payload());
-            if let Some(r) = self.recorder.as_mut() {
-                r.push(Rec::Friction(*s.payload()));
-            }
+            self.sinks.push(Rec::Friction(*s.payload()));
         }
     }
 
@@ -370,10 +384,14 @@ impl<'a> Supervisor<'a> {
 
     /// Feeds the ticks with both samples to the monitors.
     fn pair(&mut self) {
-        let (monitor, faults) = (&mut self.monitor, &mut self.faults);
+        let (monitor, faults, sinks) = (&mut self.monitor, &mut self.faults, &mut self.sinks);
+        let live = sinks.any();
         self.joiner.pairs(|p, s| {
             monitor.push(p, s);
             faults.push(p, s);
+            if live && let Some(r) = view::live(p, s) {
+                sinks.push(r);
+            }
         });
     }
 
@@ -477,6 +495,11 @@ impl<'a> Supervisor<'a> {
         if self.last_status.elapsed() < Duration::from_millis(500) {
             return;
         }
+        self.send_status(msg::SupervisorPhase::Running);
+    }
+
+    /// Publishes (and records) the supervisor's status now.
+    fn send_status(&mut self, phase: msg::SupervisorPhase) {
         self.last_status = Instant::now();
         self.status_seq += 1;
         let mut st = SupervisorStatus {
@@ -485,7 +508,7 @@ impl<'a> Supervisor<'a> {
             seq: self.status_seq,
             publish_ns: rt::monotonic_ns(),
             pid: std::process::id() as i32,
-            phase: msg::SupervisorPhase::Running.into(),
+            phase: phase.into(),
             scenario: fixed_str(self.scenario_name),
             elapsed_s: self.last_time_s,
             duration_s: self.duration,
@@ -501,9 +524,7 @@ impl<'a> Supervisor<'a> {
             };
         }
         let _ = self.ports.status.send_copy(st);
-        if let Some(r) = self.recorder.as_mut() {
-            r.push(Rec::Status(st));
-        }
+        self.sinks.push(Rec::Status(st));
     }
 
     /// A progress line on stderr every second (rewritten in place on a terminal).
@@ -555,6 +576,8 @@ impl<'a> Supervisor<'a> {
     /// run took (s).
     pub fn shut_down(&mut self) -> f64 {
         let wall_s = self.t0.elapsed().as_secs_f64();
+        // Observers (`afs view`) leave on this, before the prefix is released.
+        self.send_status(msg::SupervisorPhase::Stopping);
         for b in [Board::Servo, Board::Estimator, Board::Sensor] {
             if let Some(p) = self.proc_mut(b) {
                 p.stop(Duration::from_secs(2));
@@ -573,8 +596,10 @@ impl<'a> Supervisor<'a> {
         wall_s
     }
 
-    /// Ends the recording, if any.
-    pub fn finish_recording(&mut self) -> Result<Option<crate::tools::record::RecordSummary>> {
-        self.recorder.take().map(|r| r.finish()).transpose()
+    /// Ends the recording and the live view, if any.
+    pub fn finish_sinks(&mut self) -> Result<(Option<RecordSummary>, Option<ViewSummary>)> {
+        let view = self.sinks.view.take().map(LiveView::finish);
+        let record = self.sinks.recorder.take().map(|r| r.finish()).transpose()?;
+        Ok((record, view))
     }
 }

@@ -6,3 +6,5 @@ pub mod experiment;
 pub mod plot;
 pub mod record;
 pub mod sensor;
+pub mod view;
+pub mod view_client;

@@ -13,7 +13,8 @@
 //!   its servo at the same SCHED_FIFO priority on the same core, half a period out of phase:
 //!   both see the same machine at the same time.
 //! * **stack**: the full graph's force-data age at use, servo wake latency and misses, without
-//!   and with a CPU hog on the other core, in four alternating stack runs of half the duration.
+//!   and with a CPU hog on the other core, and with a Foxglove client reading every topic of
+//!   the live view (`afs run --foxglove`), in six alternating stack runs of half the duration.
 //!
 //! Each part writes one `.hgrm` per series (HdrHistogram's percentile distribution) and a
 //! percentile plot into `--out`, and reports p50 … max per series with its ratio to its floor,

@@ -42,6 +42,9 @@ pub struct RunSums {
     pub stack_runs: u64,
     /// A hog ran on the other core.
     pub hog_running: bool,
+    /// A Foxglove client was attached to the live view.
+    #[serde(default)]
+    pub viewer: bool,
     /// Servo ticks that missed their period.
     pub misses: u64,
     /// Servo ticks.
@@ -54,13 +57,17 @@ pub struct RunSums {
     pub passed: bool,
 }
 
-/// The stack runs without and with the hog.
+/// The stack runs without and with the hog, and with a Foxglove client on the live view.
 #[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 pub struct StackRuns {
     /// Without the hog.
     pub without_hog: RunSums,
     /// With it.
     pub with_hog: RunSums,
+    /// With `--foxglove` and a client subscribed to every topic (no hog).
+    pub with_viewer: RunSums,
+    /// Messages that client received.
+    pub viewer_messages: u64,
 }
 
 /// The stack part's report.
@@ -92,6 +99,7 @@ fn run_stack<T: Send>(
     prefix: &str,
     duration_s: f64,
     dir: &Path,
+    extra: &[String],
     stop: &AtomicBool,
     during: impl FnOnce(&AtomicBool) -> T + Send,
 ) -> Result<(StackRun, T)> {
@@ -113,6 +121,7 @@ fn run_stack<T: Send>(
     let child = Command::new(std::env::current_exe().context("locating afs")?)
         .args(["run", "--json", "--quiet", "--config"])
         .arg(&file)
+        .args(extra)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -249,7 +258,7 @@ pub(super) fn jitter(opts: &BenchOptions, stop: &AtomicBool) -> Result<LoopPart>
     let prefix = format!("{}l", opts.prefix);
     let dir = scratch(&prefix)?;
     let (cpu, prio) = servo_spec()?;
-    let (run, bare) = run_stack(&prefix, opts.duration_s, &dir, stop, |running| {
+    let (run, bare) = run_stack(&prefix, opts.duration_s, &dir, &[], stop, |running| {
         bare_loop(&prefix, cpu, prio, opts.duration_s, running)
     })?;
     let _ = std::fs::remove_dir_all(&dir);
@@ -318,12 +327,54 @@ struct StackSums {
     passed: bool,
 }
 
+/// The kinds of stack run, alternated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    Plain,
+    Hog,
+    Viewer,
+}
+
+/// A client on the live view at `addr`, subscribed to every topic and reading until the
+/// stack ends; the messages it received.
+fn viewer(addr: &str, running: &AtomicBool) -> u64 {
+    use crate::tools::record::TOPICS;
+    use crate::tools::view_client::ViewClient;
+    let all: Vec<&str> = TOPICS.iter().map(|t| t.0).collect();
+    let url = format!("ws://{addr}");
+    let Ok(mut c) = ViewClient::connect(&url, Duration::from_secs(30)) else {
+        return 0;
+    };
+    if c.wait_for(&all, Duration::from_secs(30)).is_err() || c.subscribe(&all).is_err() {
+        return 0;
+    }
+    let mut n = 0;
+    while running.load(Ordering::Relaxed) {
+        match c.next_message() {
+            Ok(Some(_)) => n += 1,
+            Ok(None) => {}
+            Err(_) => break,
+        }
+    }
+    n
+}
+
+/// A loopback port free now.
+fn free_port() -> Result<u16> {
+    Ok(std::net::TcpListener::bind("127.0.0.1:0")
+        .context("finding a free port for the live view")?
+        .local_addr()?
+        .port())
+}
+
 pub(super) fn stack(opts: &BenchOptions, stop: &AtomicBool) -> Result<StackPart> {
     let (cpu, _) = servo_spec()?;
     let other = if cpu == 0 { 1 } else { 0 };
     let can_hog = rt::available_cpus() > 1;
-    // Alternating halves (A B A B) so that a noisy stretch of the machine falls on both kinds.
-    let mut sums: Vec<StackSums> = (0..2)
+    let kinds = [Kind::Plain, Kind::Hog, Kind::Viewer];
+    // Alternating (A B C A B C) so that a noisy stretch of the machine falls on every kind.
+    let mut sums: Vec<StackSums> = kinds
+        .iter()
         .map(|_| {
             Ok(StackSums {
                 wake: hist::new()?,
@@ -337,19 +388,38 @@ pub(super) fn stack(opts: &BenchOptions, stop: &AtomicBool) -> Result<StackPart>
             })
         })
         .collect::<Result<_>>()?;
-    for (i, with_hog) in [false, true, false, true].into_iter().enumerate() {
+    let mut viewer_messages = 0;
+    for i in 0..2 * kinds.len() {
         if stop.load(Ordering::Relaxed) {
             break;
         }
+        let kind = kinds[i % kinds.len()];
         let prefix = format!("{}s{i}", opts.prefix);
         let dir = scratch(&prefix)?;
-        let (r, ()) = run_stack(&prefix, opts.duration_s / 2.0, &dir, stop, |running| {
-            if with_hog && can_hog {
-                hog(other, running);
-            }
-        })?;
+        let addr = format!("127.0.0.1:{}", free_port()?);
+        let extra: Vec<String> = if kind == Kind::Viewer {
+            vec!["--foxglove".into(), addr.clone()]
+        } else {
+            Vec::new()
+        };
+        let (r, seen) = run_stack(
+            &prefix,
+            opts.duration_s / 2.0,
+            &dir,
+            &extra,
+            stop,
+            |running| match kind {
+                Kind::Hog if can_hog => {
+                    hog(other, running);
+                    0
+                }
+                Kind::Viewer => viewer(&addr, running),
+                _ => 0,
+            },
+        )?;
+        viewer_messages += seen;
         let _ = std::fs::remove_dir_all(&dir);
-        let k = &mut sums[usize::from(with_hog)];
+        let k = &mut sums[i % kinds.len()];
         k.wake.add(&r.wake).context("adding histograms")?;
         k.age.add(&r.age).context("adding histograms")?;
         let l = r.report.loop_stats.unwrap_or_default();
@@ -363,16 +433,31 @@ pub(super) fn stack(opts: &BenchOptions, stop: &AtomicBool) -> Result<StackPart>
     let sensor_period_us = 1e6 / afs_shared::sim::SimConfig::default().sensor.rate_hz;
     let mut series = Vec::new();
     let mut runs = Vec::new();
-    for (hogged, k) in sums.into_iter().enumerate() {
-        let hogged = hogged == 1;
-        let (wake, age) = if hogged {
-            ("servo_wake_hog", "force_age_hog")
-        } else {
-            ("servo_wake", "force_age")
+    for (kind, k) in kinds.into_iter().zip(sums) {
+        let (wake, age, wake_what, age_what) = match kind {
+            Kind::Plain => (
+                "servo_wake",
+                "force_age",
+                "servo wake latency",
+                "force data age at use (sensor sample to servo tick)",
+            ),
+            Kind::Hog => (
+                "servo_wake_hog",
+                "force_age_hog",
+                "servo wake latency, CPU hog on the other core",
+                "force data age at use, CPU hog on the other core",
+            ),
+            Kind::Viewer => (
+                "servo_wake_viewer",
+                "force_age_viewer",
+                "servo wake latency, a Foxglove client on the live view",
+                "force data age at use, a Foxglove client on the live view",
+            ),
         };
         runs.push(RunSums {
             stack_runs: k.runs,
-            hog_running: hogged && can_hog,
+            hog_running: kind == Kind::Hog && can_hog,
+            viewer: kind == Kind::Viewer,
             misses: k.misses,
             ticks: k.ticks,
             safe_entries: k.safe_entries,
@@ -381,21 +466,13 @@ pub(super) fn stack(opts: &BenchOptions, stop: &AtomicBool) -> Result<StackPart>
         });
         series.push(Series {
             name: wake,
-            what: if hogged {
-                "servo wake latency, CPU hog on the other core"
-            } else {
-                "servo wake latency"
-            },
-            floor: if hogged { Some("servo_wake") } else { None },
+            what: wake_what,
+            floor: (kind != Kind::Plain).then_some("servo_wake"),
             hist: k.wake,
         });
         series.push(Series {
             name: age,
-            what: if hogged {
-                "force data age at use, CPU hog on the other core"
-            } else {
-                "force data age at use (sensor sample to servo tick)"
-            },
+            what: age_what,
             floor: Some("sensor period"),
             hist: k.age,
         });
@@ -415,17 +492,33 @@ pub(super) fn stack(opts: &BenchOptions, stop: &AtomicBool) -> Result<StackPart>
             .target(),
         );
     }
+    let p99 = |name: &str| {
+        series
+            .iter()
+            .find(|s| s.name == name)
+            .map(|s| QuantilesUs::of(&s.hist).p99)
+    };
+    if let (Some(with), Some(without)) = (p99("servo_wake_viewer"), p99("servo_wake")) {
+        targets.push(
+            Check::at_most(
+                "servo wake p99 with a Foxglove client / without",
+                with / without,
+                1.1,
+            )
+            .target(),
+        );
+    }
     let part = finish_part(
         "stack",
         &series,
         &consts,
         targets,
         &opts.out,
-        "stack: servo wake latency and force age at use, without and with a CPU hog",
+        "stack: servo wake latency and force age at use, without and with a CPU hog or a Foxglove client",
     )?;
-    let [without_hog, with_hog]: [RunSums; 2] = runs
+    let [without_hog, with_hog, with_viewer]: [RunSums; 3] = runs
         .try_into()
-        .map_err(|_| anyhow::anyhow!("two kinds of stack run"))?;
+        .map_err(|_| anyhow::anyhow!("three kinds of stack run"))?;
     Ok(StackPart {
         scenario: "surface-tracking".into(),
         hog_cpu: other,
@@ -433,6 +526,8 @@ pub(super) fn stack(opts: &BenchOptions, stop: &AtomicBool) -> Result<StackPart>
         runs: StackRuns {
             without_hog,
             with_hog,
+            with_viewer,
+            viewer_messages,
         },
         part,
     })

@@ -1,0 +1,455 @@
+//! The live view: a Foxglove WebSocket server (the `foxglove` crate) publishing a running
+//! stack's topics, the same topics and JSON schemas as the MCAP recording, at a rate a person
+//! can watch.
+//!
+//! It lives on the observer's side only: the supervisor (`afs run --foxglove`) or `afs view`
+//! (attached to a running stack) hands it the samples it already reads. The hand-over is a
+//! bounded channel that drops when full, the server keeps a bounded backlog per client and
+//! drops the oldest message when a client falls behind; nothing here can block a board, and
+//! the boards do not know the view exists. High-rate streams (world, controller, force and the
+//! derived `/live` record) are decimated to `rate_hz` before the hand-over (the world and
+//! controller at the same ticks, so the two stay paired); the low-rate streams pass whole.
+//! Nothing is encoded while no client subscribes to a topic.
+
+use super::record::{Rec, TOPICS, json_schema};
+use crate::ipc;
+use crate::supervisor::Joiner;
+use afs_shared::live::LiveSample;
+use afs_shared::msg::{PlantSample, ServoSample, SupervisorPhase};
+use anyhow::{Context, Result, bail};
+use foxglove::{ChannelBuilder, Context as FoxContext, PartialMetadata, RawChannel, Schema};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+/// Foxglove's usual port.
+pub const DEFAULT_ADDR: &str = "127.0.0.1:8765";
+
+/// Samples the hand-over holds before dropping (a second of the decimated streams at the
+/// highest rate allowed).
+const QUEUE: usize = 65_536;
+
+/// Messages a client's backlog holds before the server drops its oldest.
+const CLIENT_BACKLOG: usize = 4_096;
+
+/// How long clients get to answer the close when the view ends.
+const CLOSE_GRACE: Duration = Duration::from_secs(2);
+
+/// The highest rate the view publishes a stream at (Hz).
+pub const MAX_RATE_HZ: f64 = 10_000.0;
+
+/// Where and how fast the view publishes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ViewSettings {
+    /// Address to listen on (port 0: any free port).
+    pub addr: SocketAddr,
+    /// Rate of each high-rate stream (Hz).
+    pub rate_hz: f64,
+}
+
+impl ViewSettings {
+    /// Checks the settings; `addr` is `HOST:PORT`.
+    pub fn parse(addr: &str, rate_hz: f64) -> Result<Self> {
+        let addr: SocketAddr = addr.parse().with_context(|| {
+            format!(
+                "--foxglove '{addr}' is not an address; give it as HOST:PORT, e.g. {DEFAULT_ADDR}"
+            )
+        })?;
+        if !(rate_hz.is_finite() && rate_hz > 0.0 && rate_hz <= MAX_RATE_HZ) {
+            bail!("--foxglove-hz must be in (0, {MAX_RATE_HZ}] Hz, got {rate_hz}");
+        }
+        Ok(Self { addr, rate_hz })
+    }
+}
+
+/// What the view did.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct ViewSummary {
+    /// The address clients connect to (`ws://HOST:PORT`).
+    pub url: String,
+    /// Rate of each high-rate stream (Hz).
+    pub rate_hz: f64,
+    /// Messages handed to the server per topic (to every subscribed client).
+    pub published: BTreeMap<String, u64>,
+    /// Decimated samples no client was subscribed to (not encoded).
+    pub unwatched: u64,
+    /// Samples dropped because the view's thread fell behind.
+    pub dropped: u64,
+    /// Most clients connected at once (as seen every 1024 samples).
+    pub max_clients: u64,
+}
+
+/// Keeps every `stride`-th tick, and force samples `every_ns` apart.
+#[derive(Debug, Clone, Copy)]
+struct Decimator {
+    rate_hz: f64,
+    /// Ticks between kept world/controller samples (None: not known yet).
+    stride: Option<u64>,
+    /// A first world sample, to learn the tick period from when it is not given.
+    first: Option<(u64, f64)>,
+    every_ns: u64,
+    last_bucket: Option<u64>,
+}
+
+impl Decimator {
+    fn new(rate_hz: f64, tick_hz: Option<f64>) -> Self {
+        Self {
+            rate_hz,
+            stride: tick_hz.map(|t| Self::stride_of(t, rate_hz)),
+            first: None,
+            every_ns: (1e9 / rate_hz) as u64,
+            last_bucket: None,
+        }
+    }
+
+    fn stride_of(tick_hz: f64, rate_hz: f64) -> u64 {
+        (tick_hz / rate_hz).round().max(1.0) as u64
+    }
+
+    fn tick(&mut self, seq: u64, time_s: f64) -> bool {
+        if self.stride.is_none() {
+            match self.first {
+                Some((s0, t0)) if seq > s0 && time_s > t0 => {
+                    let tick_hz = (seq - s0) as f64 / (time_s - t0);
+                    self.stride = Some(Self::stride_of(tick_hz, self.rate_hz));
+                }
+                _ => self.first = Some((seq, time_s)),
+            }
+        }
+        self.stride.is_some_and(|k| seq.is_multiple_of(k))
+    }
+
+    fn keep(&mut self, r: &Rec) -> bool {
+        match r {
+            Rec::Plant(p) => self.tick(p.seq, p.time_s),
+            // The world sample of the tick came first and taught the stride.
+            Rec::Servo(s) => self.stride.is_some_and(|k| s.seq.is_multiple_of(k)),
+            Rec::Live(l) => self.stride.is_some_and(|k| l.seq.is_multiple_of(k)),
+            // The first sample of each period of the rate.
+            Rec::Wrench(w) => {
+                let bucket = w.sample_ns / self.every_ns.max(1);
+                let keep = self.last_bucket != Some(bucket);
+                self.last_bucket = Some(bucket);
+                keep
+            }
+            _ => true,
+        }
+    }
+}
+
+/// A live view being served.
+pub struct LiveView {
+    tx: SyncSender<Rec>,
+    dropped: u64,
+    decimator: Decimator,
+    url: String,
+    handle: JoinHandle<ViewSummary>,
+}
+
+impl LiveView {
+    /// Starts the server on `settings.addr`; `tick_hz` is the servo's tick rate (None: learnt
+    /// from the world stream). `name` is what clients show.
+    pub fn start(settings: ViewSettings, tick_hz: Option<f64>, name: &str) -> Result<Self> {
+        let ctx = FoxContext::new();
+        let mut channels = Vec::new();
+        for (topic, ty) in TOPICS {
+            let ch = ChannelBuilder::new(topic)
+                .context(&ctx)
+                .message_encoding("json")
+                .schema(Schema::new(ty, "jsonschema", json_schema(ty).into_bytes()))
+                .build_raw()
+                .with_context(|| format!("creating the live view's channel {topic}"))?;
+            channels.push(ch);
+        }
+        let server = foxglove::WebSocketServer::new()
+            .name(name)
+            .context(&ctx)
+            .bind(settings.addr.ip().to_string(), settings.addr.port())
+            .message_backlog_size(CLIENT_BACKLOG)
+            .start_blocking()
+            .map_err(|e| {
+                anyhow::anyhow!(
+                    "the live view cannot listen on {}: {e}; give another --foxglove HOST:PORT (port 0 picks a free one)",
+                    settings.addr
+                )
+            })?;
+        let url = format!("ws://{}:{}", settings.addr.ip(), server.port());
+        let (tx, rx) = sync_channel(QUEUE);
+        let summary = ViewSummary {
+            url: url.clone(),
+            rate_hz: settings.rate_hz,
+            ..Default::default()
+        };
+        let handle = std::thread::Builder::new()
+            .name("afs-view".into())
+            .spawn(move || serve(rx, server, channels, ctx, summary))
+            .context("starting the live view's thread")?;
+        Ok(Self {
+            tx,
+            dropped: 0,
+            decimator: Decimator::new(settings.rate_hz, tick_hz),
+            url,
+            handle,
+        })
+    }
+
+    /// The address clients connect to.
+    pub fn url(&self) -> &str {
+        &self.url
+    }
+
+    /// Offers a sample; never blocks.
+    pub fn push(&mut self, r: Rec) {
+        if !self.decimator.keep(&r) {
+            return;
+        }
+        match self.tx.try_send(r) {
+            Ok(()) => {}
+            Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => self.dropped += 1,
+        }
+    }
+
+    /// Closes the server (clients see the connection end).
+    pub fn finish(self) -> ViewSummary {
+        drop(self.tx);
+        let mut s = self.handle.join().unwrap_or_default();
+        s.dropped += self.dropped;
+        s
+    }
+}
+
+fn serve(
+    rx: Receiver<Rec>,
+    server: foxglove::WebSocketServerHandle,
+    channels: Vec<Arc<RawChannel>>,
+    ctx: Arc<FoxContext>,
+    mut summary: ViewSummary,
+) -> ViewSummary {
+    let mut counts = [0u64; TOPICS.len()];
+    let mut seen = 0u64;
+    for r in rx {
+        seen += 1;
+        if seen % 1024 == 1 {
+            summary.max_clients = summary.max_clients.max(server.client_count() as u64);
+        }
+        let c = r.channel();
+        if !channels[c].has_sinks() {
+            summary.unwatched += 1;
+            continue;
+        }
+        let Ok(data) = r.json() else {
+            summary.dropped += 1;
+            continue;
+        };
+        channels[c].log_with_meta(
+            &data,
+            PartialMetadata {
+                log_time: Some(r.publish_ns()),
+            },
+        );
+        counts[c] += 1;
+    }
+    summary.max_clients = summary.max_clients.max(server.client_count() as u64);
+    for (i, (topic, _)) in TOPICS.iter().enumerate() {
+        summary.published.insert((*topic).into(), counts[i]);
+    }
+    // Clients get a close frame; one that does not read may never answer it, so the
+    // graceful close gets a bounded wait and is then left to the process's exit.
+    let closing = server.stop();
+    let (done_tx, done_rx) = std::sync::mpsc::channel();
+    let _ = std::thread::Builder::new()
+        .name("afs-view-close".into())
+        .spawn(move || {
+            closing.wait_blocking();
+            let _ = done_tx.send(());
+        });
+    let _ = done_rx.recv_timeout(CLOSE_GRACE);
+    drop(ctx);
+    summary
+}
+
+/// `afs view`: serves a live view of the running stack `prefix` until it ends or `stop` is
+/// set. Reads its streams as one more subscriber (history 1 on the status streams, so the
+/// latest statistics show at once).
+pub fn attach(prefix: &str, settings: ViewSettings, stop: &AtomicBool) -> Result<ViewSummary> {
+    ipc::check_prefix(prefix)?;
+    if ipc::census(prefix, false)?.alive.is_empty() {
+        bail!(
+            "no stack with prefix '{prefix}' is running; start one with `afs run --prefix {prefix}`"
+        );
+    }
+    let node = ipc::node(prefix, "view")?;
+    let sub = |what: &str| format!("creating the view's {what} subscriber");
+    let plant = ipc::plant(&node)?
+        .subscriber_builder()
+        .create()
+        .with_context(|| sub("world"))?;
+    let servo = ipc::servo(&node)?
+        .subscriber_builder()
+        .create()
+        .with_context(|| sub("controller"))?;
+    let wrench = ipc::wrench(&node)?
+        .subscriber_builder()
+        .create()
+        .with_context(|| sub("force"))?;
+    let stats = ipc::loop_stats(&node)?
+        .subscriber_builder()
+        .create()
+        .with_context(|| sub("loop-statistics"))?;
+    let sensor_stats = ipc::sensor_stats(&node)?
+        .subscriber_builder()
+        .create()
+        .with_context(|| sub("sensor-statistics"))?;
+    let friction = ipc::friction(&node)?
+        .subscriber_builder()
+        .create()
+        .with_context(|| sub("friction"))?;
+    let status = ipc::supervisor(&node)?
+        .subscriber_builder()
+        .create()
+        .with_context(|| sub("status"))?;
+    let mut view = LiveView::start(settings, None, &format!("afs {prefix}"))?;
+    eprintln!("afs: live view of stack '{prefix}' at {}", view.url());
+    let mut joiner = Joiner::default();
+    let mut heard = Instant::now();
+    while !stop.load(Ordering::Relaxed) {
+        std::thread::sleep(Duration::from_millis(5));
+        let mut any = false;
+        while let Ok(Some(s)) = plant.receive() {
+            any = true;
+            let p = *s.payload();
+            if !joiner.is_repeat(&p) {
+                view.push(Rec::Plant(p));
+                joiner.push_plant(p);
+            }
+        }
+        while let Ok(Some(s)) = servo.receive() {
+            any = true;
+            view.push(Rec::Servo(*s.payload()));
+            joiner.push_servo(*s.payload());
+        }
+        joiner.pairs(|p, s| {
+            if let Some(r) = live(p, s) {
+                view.push(r);
+            }
+        });
+        while let Ok(Some(s)) = wrench.receive() {
+            any = true;
+            view.push(Rec::Wrench(*s.payload()));
+        }
+        while let Ok(Some(s)) = stats.receive() {
+            view.push(Rec::Stats(*s.payload()));
+        }
+        while let Ok(Some(s)) = sensor_stats.receive() {
+            view.push(Rec::SensorStats(*s.payload()));
+        }
+        while let Ok(Some(s)) = friction.receive() {
+            view.push(Rec::Friction(*s.payload()));
+        }
+        let mut stopping = false;
+        while let Ok(Some(s)) = status.receive() {
+            any = true;
+            let st = *s.payload();
+            view.push(Rec::Status(st));
+            stopping |= SupervisorPhase::try_from(st.phase) == Ok(SupervisorPhase::Stopping);
+        }
+        if stopping {
+            eprintln!("afs: stack '{prefix}' is stopping");
+            break;
+        }
+        if any {
+            heard = Instant::now();
+        } else if heard.elapsed() > Duration::from_secs(2) {
+            // Silent for 2 s: ended, or between a board's death and its restart.
+            let others = ipc::census(prefix, false)?
+                .alive
+                .iter()
+                .filter(|(n, _)| n != "view")
+                .count();
+            if others == 0 {
+                eprintln!("afs: stack '{prefix}' ended");
+                break;
+            }
+            heard = Instant::now();
+        }
+    }
+    // Leave the prefix as the supervisor would if this was its last node (the supervisor
+    // was killed): iceoryx2 keeps the node counter, which is removed by name.
+    drop((
+        plant,
+        servo,
+        wrench,
+        stats,
+        sensor_stats,
+        friction,
+        status,
+        node,
+    ));
+    let _ = ipc::release_prefix(prefix);
+    Ok(view.finish())
+}
+
+/// The live record of a joined tick, for the sinks that want it.
+pub fn live(p: &PlantSample, s: &ServoSample) -> Option<Rec> {
+    LiveSample::of_tick(p, s).map(Rec::Live)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use afs_shared::msg::WrenchSample;
+
+    #[test]
+    fn ticks_are_kept_at_the_same_seq_and_force_samples_by_time() {
+        // 10 kHz ticks at 100 Hz: every 100th, learnt from the world stream.
+        let mut d = Decimator::new(100.0, None);
+        let mut kept = Vec::new();
+        for seq in 1..=1000u64 {
+            let p = PlantSample {
+                seq,
+                time_s: seq as f64 * 1e-4,
+                ..Default::default()
+            };
+            let s = ServoSample {
+                seq,
+                ..Default::default()
+            };
+            let (kp, ks) = (d.keep(&Rec::Plant(p)), d.keep(&Rec::Servo(s)));
+            assert_eq!(kp, ks, "tick {seq}");
+            if kp {
+                kept.push(seq);
+            }
+        }
+        assert_eq!(kept, [100, 200, 300, 400, 500, 600, 700, 800, 900, 1000]);
+        // Given the tick rate, from the start.
+        let mut g = Decimator::new(2_500.0, Some(10_000.0));
+        let p0 = PlantSample::default();
+        assert!(g.keep(&Rec::Plant(p0)));
+        // 7 kHz force samples at 1 kHz: one per millisecond.
+        let mut w = Decimator::new(1_000.0, None);
+        let n = (0..7000u64)
+            .filter(|i| {
+                w.keep(&Rec::Wrench(WrenchSample {
+                    sample_ns: i * 1_000_000_000 / 7000,
+                    ..Default::default()
+                }))
+            })
+            .count();
+        assert_eq!(n, 1000);
+    }
+
+    #[test]
+    fn bad_settings_are_refused_with_the_fix() {
+        let e = ViewSettings::parse("localhost", 100.0).unwrap_err();
+        assert!(format!("{e:#}").contains("HOST:PORT"), "{e:#}");
+        for hz in [0.0, -1.0, f64::NAN, 1e6] {
+            assert!(ViewSettings::parse(DEFAULT_ADDR, hz).is_err(), "{hz}");
+        }
+        assert!(ViewSettings::parse("127.0.0.1:0", 50.0).is_ok());
+    }
+}

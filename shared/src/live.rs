@@ -1,0 +1,121 @@
+//! What a person watching a running stack wants per tick, in one flat record: the sensed and
+//! true normal force, the tangential force and friction, the dither's Aω, the tangent error,
+//! the force data's age and the servo's flags. Built from the world and controller samples of
+//! one tick (the tangent error needs the world's true tangent, which the controller never
+//! sees); the live view and the recording publish it as the `/live` topic, and
+//! `examples/foxglove-layout.json` plots it.
+
+use crate::math::wrap_angle;
+use crate::monitor::MonitorTick;
+use crate::msg::{PlantSample, ServoFlags, ServoSample};
+use serde::Serialize;
+
+/// One tick, for display. Units are in the field names.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct LiveSample {
+    /// Servo tick index (the two samples' common `seq`).
+    pub seq: u64,
+    /// Monotonic time the controller's sample was published (ns).
+    pub publish_ns: u64,
+    /// Simulated time (s).
+    pub time_s: f64,
+    /// Normal force the controller measured (N).
+    pub normal_force_n: f64,
+    /// True normal force (N).
+    pub true_normal_force_n: f64,
+    /// Tangential force the controller measured (N, along the estimated tangent).
+    pub tangential_force_n: f64,
+    /// Measured friction resisting the nominal motion (N).
+    pub friction_n: f64,
+    /// Commanded Aω (m/s).
+    pub a_omega_m_per_s: f64,
+    /// Nominal tangential velocity (m/s).
+    pub nominal_velocity_m_per_s: f64,
+    /// Estimated minus true tangent angle, wrapped to (−180°, 180°] (deg).
+    pub tangent_error_deg: f64,
+    /// Age of the force data the controller used (µs).
+    pub force_age_us: f64,
+    /// Controller mode (`ServoMode` wire code: 0 track, 1 stopping, 2 probing, 3 awaiting
+    /// the estimate, 4 resuming).
+    pub mode: u32,
+    /// The servo is in its safe state.
+    pub safe: bool,
+    /// The force sample used passed the gate.
+    pub force_valid: bool,
+    /// The set-point was out of reach and held.
+    pub setpoint_held: bool,
+    /// Waiting for the estimator's answer.
+    pub awaiting_estimate: bool,
+    /// The tool touches the surface.
+    pub in_contact: bool,
+}
+
+impl LiveSample {
+    /// The record of one tick; None when the two samples are of different ticks.
+    pub fn of_tick(p: &PlantSample, s: &ServoSample) -> Option<Self> {
+        if p.seq != s.seq {
+            return None;
+        }
+        let m = MonitorTick::from_samples(p, s);
+        Some(Self {
+            seq: s.seq,
+            publish_ns: s.publish_ns,
+            time_s: s.time_s,
+            normal_force_n: s.normal_force_n,
+            true_normal_force_n: p.normal_force_n,
+            tangential_force_n: s.tangential_force_n,
+            friction_n: m.friction,
+            a_omega_m_per_s: s.a_omega_m_per_s,
+            nominal_velocity_m_per_s: s.nominal_velocity_m_per_s,
+            tangent_error_deg: wrap_angle(m.tangent_estimated - m.tangent_true).to_degrees(),
+            force_age_us: s.force_age_ns as f64 * 1e-3,
+            mode: s.mode,
+            safe: s.flags.contains(ServoFlags::SAFE),
+            force_valid: s.flags.contains(ServoFlags::FORCE_VALID),
+            setpoint_held: s.flags.contains(ServoFlags::SETPOINT_HELD),
+            awaiting_estimate: s.flags.contains(ServoFlags::AWAITING_ESTIMATE),
+            in_contact: m.contact,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pair(seq: u64) -> (PlantSample, ServoSample) {
+        let p = PlantSample {
+            seq,
+            normal_force_n: 10.5,
+            contact_count: 1,
+            tangent_angle_rad: 179f64.to_radians(),
+            ..Default::default()
+        };
+        let mut s = ServoSample {
+            seq,
+            normal_force_n: 9.5,
+            tangential_force_n: -2.0,
+            velocity_target_m_per_s: 0.02,
+            tangent_angle_rad: -179f64.to_radians(),
+            force_age_ns: 143_000,
+            ..Default::default()
+        };
+        s.flags.set(ServoFlags::SAFE, true);
+        (p, s)
+    }
+
+    #[test]
+    fn the_tangent_error_wraps_and_the_fields_come_from_their_tick() {
+        let (p, s) = pair(7);
+        let l = LiveSample::of_tick(&p, &s).unwrap();
+        // −179° estimated against 179° true is 2°, not −358°.
+        assert!((l.tangent_error_deg - 2.0).abs() < 1e-9, "{l:?}");
+        assert_eq!((l.normal_force_n, l.true_normal_force_n), (9.5, 10.5));
+        // Friction resists the nominal (positive) motion: the measured force is −2 N.
+        assert_eq!(l.friction_n, 2.0);
+        assert!((l.force_age_us - 143.0).abs() < 1e-9);
+        assert!(l.safe && !l.force_valid && !l.awaiting_estimate && l.in_contact);
+        let (q, _) = pair(8);
+        assert_eq!(LiveSample::of_tick(&q, &s), None);
+    }
+}
