@@ -133,6 +133,50 @@ pub fn available_cpus() -> usize {
     }
 }
 
+/// Keeps the calling thread (and the threads it creates from now on) off the CPUs `avoid`,
+/// e.g. the real-time boards' cores. Returns a warning instead when that would leave no CPU or
+/// the kernel refuses; the thread then stays where it was.
+pub fn avoid_cpus(avoid: &[usize]) -> Option<String> {
+    let n = available_cpus();
+    let keep: Vec<usize> = (0..n.min(libc::CPU_SETSIZE as usize))
+        .filter(|c| !avoid.contains(c))
+        .collect();
+    if keep.is_empty() {
+        return Some(format!(
+            "every CPU ({n}) runs a real-time board; the live view shares their cores"
+        ));
+    }
+    // SAFETY: cpu_set_t is plain data; CPU_SET indexes within its size (c < CPU_SETSIZE).
+    let rc = unsafe {
+        let mut set: libc::cpu_set_t = std::mem::zeroed();
+        for &c in &keep {
+            libc::CPU_SET(c, &mut set);
+        }
+        libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set)
+    };
+    (rc != 0).then(|| {
+        format!(
+            "keeping off CPUs {avoid:?} refused ({})",
+            io::Error::last_os_error()
+        )
+    })
+}
+
+/// The one CPU process `pid` is pinned to, if it is pinned to exactly one.
+pub fn pinned_cpu(pid: i32) -> Option<usize> {
+    // SAFETY: cpu_set_t is plain data; sched_getaffinity fills it for `pid`.
+    unsafe {
+        let mut set: libc::cpu_set_t = std::mem::zeroed();
+        if libc::sched_getaffinity(pid, std::mem::size_of::<libc::cpu_set_t>(), &mut set) != 0 {
+            return None;
+        }
+        let on: Vec<usize> = (0..libc::CPU_SETSIZE as usize)
+            .filter(|&c| libc::CPU_ISSET(c, &set))
+            .collect();
+        (on.len() == 1).then(|| on[0])
+    }
+}
+
 /// Makes the calling process receive SIGTERM when its parent dies (so no board keeps running
 /// unsupervised), and exits at once if the parent is already gone. For `pre_exec`.
 pub fn die_with_parent(parent: libc::pid_t) -> io::Result<()> {
@@ -151,6 +195,30 @@ pub fn die_with_parent(parent: libc::pid_t) -> io::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A thread kept off CPU 0 runs on the others and reads back as pinned when one is left;
+    /// keeping off every CPU is refused with a warning, not done.
+    #[test]
+    fn avoiding_cpus_leaves_the_others() {
+        let n = available_cpus();
+        std::thread::spawn(move || {
+            let all: Vec<usize> = (0..n).collect();
+            assert!(avoid_cpus(&all).is_some_and(|w| w.contains("every CPU")));
+            if n < 2 {
+                return;
+            }
+            assert_eq!(avoid_cpus(&[0]), None);
+            // SAFETY: gettid is a plain query.
+            let tid = unsafe { libc::gettid() };
+            if n == 2 {
+                assert_eq!(pinned_cpu(tid), Some(1));
+            } else {
+                assert_eq!(pinned_cpu(tid), None);
+            }
+        })
+        .join()
+        .unwrap();
+    }
 
     /// Absolute sleeps never return early and the clock moves forward.
     #[test]

@@ -105,7 +105,14 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunReport> {
     let view = match opts.foxglove {
         Some(v) => {
             let tick_hz = 1.0 / scenario.cfg.servo.dt();
-            let lv = LiveView::start(v, Some(tick_hz), &format!("afs {prefix}"))?;
+            // The cores of the real-time boards.
+            let avoid: Vec<usize> = stack
+                .process
+                .iter()
+                .filter(|p| p.priority > 0)
+                .filter_map(|p| p.cpu)
+                .collect();
+            let lv = LiveView::start(v, Some(tick_hz), &format!("afs {prefix}"), &avoid)?;
             eprintln!(
                 "afs: live view at {} (open it in Foxglove with examples/foxglove-layout.json)",
                 lv.url()

@@ -560,9 +560,15 @@ impl<'a> Supervisor<'a> {
     /// What is still in flight after the loop.
     fn drain(&mut self) {
         while let Ok(Some(s)) = self.ports.plant.receive() {
-            self.joiner.push_plant(*s.payload());
+            let p = *s.payload();
+            if self.joiner.is_repeat(&p) {
+                continue;
+            }
+            self.sinks.push(Rec::Plant(p));
+            self.joiner.push_plant(p);
         }
         while let Ok(Some(s)) = self.ports.servo.receive() {
+            self.sinks.push(Rec::Servo(*s.payload()));
             self.joiner.push_servo(*s.payload());
         }
         self.pair();

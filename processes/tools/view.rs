@@ -12,8 +12,8 @@
 //! Nothing is encoded while no client subscribes to a topic.
 
 use super::record::{Rec, TOPICS, json_schema};
-use crate::ipc;
 use crate::supervisor::Joiner;
+use crate::{ipc, rt};
 use afs_shared::live::LiveSample;
 use afs_shared::msg::{PlantSample, ServoSample, SupervisorPhase};
 use anyhow::{Context, Result, bail};
@@ -153,42 +153,44 @@ pub struct LiveView {
 
 impl LiveView {
     /// Starts the server on `settings.addr`; `tick_hz` is the servo's tick rate (None: learnt
-    /// from the world stream). `name` is what clients show.
-    pub fn start(settings: ViewSettings, tick_hz: Option<f64>, name: &str) -> Result<Self> {
-        let ctx = FoxContext::new();
-        let mut channels = Vec::new();
-        for (topic, ty) in TOPICS {
-            let ch = ChannelBuilder::new(topic)
-                .context(&ctx)
-                .message_encoding("json")
-                .schema(Schema::new(ty, "jsonschema", json_schema(ty).into_bytes()))
-                .build_raw()
-                .with_context(|| format!("creating the live view's channel {topic}"))?;
-            channels.push(ch);
-        }
-        let server = foxglove::WebSocketServer::new()
-            .name(name)
-            .context(&ctx)
-            .bind(settings.addr.ip().to_string(), settings.addr.port())
-            .message_backlog_size(CLIENT_BACKLOG)
-            .start_blocking()
-            .map_err(|e| {
-                anyhow::anyhow!(
-                    "the live view cannot listen on {}: {e}; give another --foxglove HOST:PORT (port 0 picks a free one)",
-                    settings.addr
-                )
-            })?;
-        let url = format!("ws://{}:{}", settings.addr.ip(), server.port());
+    /// from the world stream). `name` is what clients show. The view's thread and the server's
+    /// runtime (created from it, so inheriting its CPUs) keep off the CPUs `avoid` (the
+    /// real-time boards'): their network system calls then never run on a board's core.
+    pub fn start(
+        settings: ViewSettings,
+        tick_hz: Option<f64>,
+        name: &str,
+        avoid: &[usize],
+    ) -> Result<Self> {
         let (tx, rx) = sync_channel(QUEUE);
-        let summary = ViewSummary {
-            url: url.clone(),
-            rate_hz: settings.rate_hz,
-            ..Default::default()
-        };
+        let (started_tx, started_rx) = sync_channel(1);
+        let (name, avoid) = (name.to_string(), avoid.to_vec());
         let handle = std::thread::Builder::new()
             .name("afs-view".into())
-            .spawn(move || serve(rx, server, channels, ctx, summary))
+            .spawn(move || {
+                if let Some(w) = rt::avoid_cpus(&avoid) {
+                    eprintln!("afs: warning: {w}");
+                }
+                match open_server(settings, &name) {
+                    Ok((server, channels, ctx, url)) => {
+                        let _ = started_tx.send(Ok(url.clone()));
+                        let summary = ViewSummary {
+                            url,
+                            rate_hz: settings.rate_hz,
+                            ..Default::default()
+                        };
+                        serve(rx, server, channels, ctx, summary)
+                    }
+                    Err(e) => {
+                        let _ = started_tx.send(Err(e));
+                        ViewSummary::default()
+                    }
+                }
+            })
             .context("starting the live view's thread")?;
+        let url = started_rx
+            .recv()
+            .map_err(|_| anyhow::anyhow!("the live view's thread ended before it started"))??;
         Ok(Self {
             tx,
             dropped: 0,
@@ -221,6 +223,42 @@ impl LiveView {
         s.dropped += self.dropped;
         s
     }
+}
+
+/// The server and its channels (one per topic, with the recording's schema).
+type Opened = (
+    foxglove::WebSocketServerHandle,
+    Vec<Arc<RawChannel>>,
+    Arc<FoxContext>,
+    String,
+);
+
+fn open_server(settings: ViewSettings, name: &str) -> Result<Opened> {
+    let ctx = FoxContext::new();
+    let mut channels = Vec::new();
+    for (topic, ty) in TOPICS {
+        let ch = ChannelBuilder::new(topic)
+            .context(&ctx)
+            .message_encoding("json")
+            .schema(Schema::new(ty, "jsonschema", json_schema(ty).into_bytes()))
+            .build_raw()
+            .with_context(|| format!("creating the live view's channel {topic}"))?;
+        channels.push(ch);
+    }
+    let server = foxglove::WebSocketServer::new()
+        .name(name)
+        .context(&ctx)
+        .bind(settings.addr.ip().to_string(), settings.addr.port())
+        .message_backlog_size(CLIENT_BACKLOG)
+        .start_blocking()
+        .map_err(|e| {
+            anyhow::anyhow!(
+                "the live view cannot listen on {}: {e}; give another --foxglove HOST:PORT (port 0 picks a free one)",
+                settings.addr
+            )
+        })?;
+    let url = format!("ws://{}:{}", settings.addr.ip(), server.port());
+    Ok((server, channels, ctx, url))
 }
 
 fn serve(
@@ -313,7 +351,15 @@ pub fn attach(prefix: &str, settings: ViewSettings, stop: &AtomicBool) -> Result
         .subscriber_builder()
         .create()
         .with_context(|| sub("status"))?;
-    let mut view = LiveView::start(settings, None, &format!("afs {prefix}"))?;
+    // Keep off the cores the stack's boards are pinned to.
+    let mut avoid: Vec<usize> = ipc::census(prefix, false)?
+        .alive
+        .iter()
+        .filter_map(|(_, pid)| rt::pinned_cpu(*pid))
+        .collect();
+    avoid.sort_unstable();
+    avoid.dedup();
+    let mut view = LiveView::start(settings, None, &format!("afs {prefix}"), &avoid)?;
     eprintln!("afs: live view of stack '{prefix}' at {}", view.url());
     let mut joiner = Joiner::default();
     let mut heard = Instant::now();
@@ -441,6 +487,77 @@ mod tests {
             })
             .count();
         assert_eq!(n, 1000);
+    }
+
+    /// The panels of examples/foxglove-layout.json in its tree, and each of their message
+    /// paths names a topic the view publishes and a field of that topic's schema.
+    #[test]
+    fn the_layout_plots_fields_the_view_publishes() {
+        let layout: serde_json::Value =
+            serde_json::from_str(include_str!("../../examples/foxglove-layout.json")).unwrap();
+        let cfg = layout["configById"].as_object().unwrap();
+        fn leaves(v: &serde_json::Value, out: &mut Vec<String>) {
+            match v {
+                serde_json::Value::String(s) => out.push(s.clone()),
+                serde_json::Value::Object(o) => {
+                    for k in ["first", "second"] {
+                        leaves(&o[k], out);
+                    }
+                }
+                _ => panic!("a layout node is a panel id or a split: {v}"),
+            }
+        }
+        let mut panels = Vec::new();
+        leaves(&layout["layout"], &mut panels);
+        panels.sort();
+        let mut ids: Vec<String> = cfg.keys().cloned().collect();
+        ids.sort();
+        assert_eq!(panels, ids);
+        let fields = |topic: &str| -> Vec<String> {
+            let ty = TOPICS.iter().find(|t| t.0 == topic).unwrap_or_else(|| {
+                panic!("the layout reads {topic}, which the view does not publish")
+            });
+            let schema: serde_json::Value = serde_json::from_str(&json_schema(ty.1)).unwrap();
+            schema["properties"]
+                .as_object()
+                .unwrap()
+                .keys()
+                .cloned()
+                .collect()
+        };
+        let mut checked = 0;
+        for (id, panel) in cfg {
+            if let Some(t) = panel["topicPath"].as_str() {
+                fields(t);
+                checked += 1;
+            }
+            for path in panel["paths"].as_array().into_iter().flatten() {
+                let v = path["value"].as_str().unwrap();
+                let (topic, field) = v.split_once('.').unwrap();
+                assert!(fields(topic).iter().any(|f| f == field), "{id}: {v}");
+                checked += 1;
+            }
+        }
+        // Normal and tangential force, Aω, tangent error, force age, the safe-state flags.
+        for want in [
+            "normal_force_n",
+            "tangential_force_n",
+            "a_omega_m_per_s",
+            "tangent_error_deg",
+            "force_age_us",
+            "safe",
+        ] {
+            let path = format!("/live.{want}");
+            assert!(
+                cfg.values().any(|p| p["paths"]
+                    .as_array()
+                    .into_iter()
+                    .flatten()
+                    .any(|x| x["value"] == path.as_str())),
+                "no panel shows {path}"
+            );
+        }
+        assert!(checked >= 15, "{checked}");
     }
 
     #[test]

@@ -337,7 +337,9 @@ enum Kind {
 
 /// A client on the live view at `addr`, subscribed to every topic and reading until the
 /// stack ends; the messages it received.
-fn viewer(addr: &str, running: &AtomicBool) -> u64 {
+fn viewer(addr: &str, cpu: usize, running: &AtomicBool) -> u64 {
+    // Where an operator's viewer runs: not on the servo's core.
+    pin_thread(cpu);
     use crate::tools::record::TOPICS;
     use crate::tools::view_client::ViewClient;
     let all: Vec<&str> = TOPICS.iter().map(|t| t.0).collect();
@@ -413,7 +415,7 @@ pub(super) fn stack(opts: &BenchOptions, stop: &AtomicBool) -> Result<StackPart>
                     hog(other, running);
                     0
                 }
-                Kind::Viewer => viewer(&addr, running),
+                Kind::Viewer => viewer(&addr, other, running),
                 _ => 0,
             },
         )?;
