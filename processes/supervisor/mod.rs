@@ -212,8 +212,6 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunReport> {
     drop(sup);
     drop((world, node));
     let _ = std::fs::remove_dir_all(&dir);
-    // Everything of the prefix must have gone with its nodes (iceoryx2's clean-up); what is
-    // left is a leak, reported and failed below, not removed here.
     // Observers told by the Stopping status get a moment to close their nodes first.
     let t_release = std::time::Instant::now();
     while ipc::census(&prefix, false).is_ok_and(|c| !c.alive.is_empty())
@@ -221,6 +219,8 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunReport> {
     {
         std::thread::sleep(std::time::Duration::from_millis(20));
     }
+    // Everything of the prefix must have gone with its nodes (iceoryx2's clean-up); what is
+    // left is a leak, reported and failed below, not removed here.
     let left = ipc::release_prefix(&prefix).unwrap_or_else(|_| ipc::leftovers(&prefix));
 
     // The lockstep reference, going through the stack's events (≈ 300× real time).
