@@ -13,23 +13,21 @@
 //! | `child` | one supervised process: spawn, exit, stop, start-up timelines |
 //! | `policy` | restart, backoff and stall policy (pure functions) |
 //! | `watch` | the loop: streams, injector, children, status, progress |
-//! | `join` | the world and controller streams joined by tick |
 //! | `footprint` | files and resident memory of a running stack |
 //! | `report` | the run report, its checks and summary |
 //! | `status` | `afs status` |
 
 mod child;
 mod footprint;
-mod join;
 mod policy;
 mod report;
 mod stack;
 mod status;
 mod watch;
 
+pub use afs_shared::join::{Joiner, SampleCounts};
 pub use child::{ExitRecord, Timeline};
 pub use footprint::Footprint;
-pub use join::{Joiner, SampleCounts};
 pub use report::*;
 pub use stack::*;
 pub use status::*;

@@ -2,12 +2,12 @@
 //! checks, and its text summary.
 
 use super::child::{ExitRecord, Timeline};
-use super::join::SampleCounts;
 use crate::chaos::ChaosReport;
 pub use crate::hist::QuantilesUs;
 use crate::tools::record::RecordSummary;
 use afs_shared::check::{self, Check};
 use afs_shared::faults::FaultFigures;
+use afs_shared::join::SampleCounts;
 use afs_shared::msg::{
     FrictionReport, FrictionStatus, LoopFlags, LoopStats, SensorSource, SensorStats,
 };

@@ -4,13 +4,13 @@
 use super::FAULT_SETTLE_S;
 use super::child::{Ended, Launch, Proc};
 use super::footprint::Footprint;
-use super::join::Joiner;
 use crate::chaos::{Action, BoardView, Injector, ServoView};
 use crate::ipc::{self, Svc};
 use crate::rt;
 use crate::tools::record::{Rec, RecordSummary, Recorder};
 use crate::tools::view::{self, LiveView, ViewSummary};
 use afs_shared::faults::FaultMonitor;
+use afs_shared::join::Joiner;
 use afs_shared::msg::{
     self, Board, BoardStartup, FrictionReport, LoopStats, PlantSample, ProcessState, ProcessStatus,
     SensorStats, ServoCommand, ServoSample, SupervisorStatus, WrenchFlags, WrenchSample, fixed_str,

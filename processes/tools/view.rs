@@ -12,8 +12,8 @@
 //! Nothing is encoded while no client subscribes to a topic.
 
 use super::record::{Rec, TOPICS, json_schema};
-use crate::supervisor::Joiner;
 use crate::{ipc, rt};
+use afs_shared::join::Joiner;
 use afs_shared::live::LiveSample;
 use afs_shared::msg::{PlantSample, ServoSample, SupervisorPhase};
 use anyhow::{Context, Result, bail};

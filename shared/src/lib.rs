@@ -14,6 +14,7 @@ pub mod faults;
 pub mod friction;
 pub mod hybrid;
 pub mod ident;
+pub mod join;
 pub mod live;
 pub mod math;
 pub mod monitor;

@@ -1,7 +1,7 @@
 //! Joining the world and controller streams tick by tick, counting what was lost, repeated or
 //! out of order.
 
-use afs_shared::msg::{PlantSample, ServoSample};
+use crate::msg::{PlantSample, ServoSample};
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 
@@ -78,6 +78,8 @@ impl Joiner {
         repeat
     }
 
+    /// A world sample, in arrival order: counted, and queued for pairing unless its tick is
+    /// not newer than the newest one (then it is counted as reordered and dropped).
     pub fn push_plant(&mut self, p: PlantSample) {
         self.plant_received += 1;
         if let Some(l) = self.newest_plant.map(|n| n.seq) {
@@ -95,6 +97,8 @@ impl Joiner {
         self.plant.push_back(p);
     }
 
+    /// A controller sample, in arrival order: counted, and queued for pairing unless its tick
+    /// is not newer than the last one.
     pub fn push_servo(&mut self, s: ServoSample) {
         self.servo_received += 1;
         if let Some(l) = self.last_servo {
@@ -110,6 +114,8 @@ impl Joiner {
         self.servo.push_back(s);
     }
 
+    /// Calls `f` with every queued world and controller sample of the same tick, in tick
+    /// order; samples whose partner cannot come any more are dropped.
     pub fn pairs(&mut self, mut f: impl FnMut(&PlantSample, &ServoSample)) {
         while let (Some(p), Some(s)) = (self.plant.front(), self.servo.front()) {
             if p.seq == s.seq {
