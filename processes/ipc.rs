@@ -7,8 +7,8 @@
 
 use afs_shared::msg::{
     BoardStartup, FrictionReport, LoopStats, PlantSample, RotationRequestHeader, RotationResponse,
-    RotationSample, SensorStats, ServoCommand, ServoSample, SupervisorStatus, TangentRequestHeader,
-    TangentResponse, WorldSnapshot, WrenchSample, service,
+    RotationSample, SensorStats, ServoBatch, ServoCommand, ServoSample, SupervisorStatus,
+    TangentRequestHeader, TangentResponse, WorldSnapshot, WrenchSample, service,
 };
 use afs_shared::tangent::ProbeSample;
 use anyhow::{Context, Result, bail};
@@ -135,14 +135,40 @@ pub const WRENCH_STREAM: StreamSettings = StreamSettings {
 };
 
 /// The low-rate status streams (loop statistics, friction identification, the supervisor's
-/// status): history 1, so a late subscriber gets the latest at once.
+/// status): history 1, so a late subscriber gets the latest at once. Two publishers: the
+/// board's, and the link board's tunnel, which opens one on every service it carries to or
+/// from another host (docs/link.md).
 pub const STATUS_STREAM: StreamSettings = StreamSettings {
     history: 1,
     buffer: 64,
     borrowed: None,
     subscribers: 8,
-    publishers: 1,
+    publishers: 2,
     nodes: 12,
+};
+
+/// The servo's stream packed for a link (`afs/link/servo`): no history (a far side that
+/// joins late starts with the next batch), 1.3 s of batches buffered, two publishers (the
+/// packing link board and the far side's tunnel).
+pub const LINK_STREAM: StreamSettings = StreamSettings {
+    history: 0,
+    buffer: 256,
+    borrowed: None,
+    subscribers: 4,
+    publishers: 2,
+    nodes: 8,
+};
+
+/// The estimator's answers as a topic (`afs/estimator/*/response`): no history (an answer is
+/// for the request in flight only), four publishers (the estimator, a restarted one not yet
+/// cleaned up, the tunnel).
+pub const RESPONSE_STREAM: StreamSettings = StreamSettings {
+    history: 0,
+    buffer: 8,
+    borrowed: None,
+    subscribers: 4,
+    publishers: 4,
+    nodes: 8,
 };
 
 /// The servo's command stream: no history (a restarted servo must not act on an old
@@ -243,6 +269,64 @@ pub fn command(node: &Node<Svc>) -> Result<publish_subscribe::PortFactory<Svc, S
 /// The boards' start-up reports.
 pub fn startup(node: &Node<Svc>) -> Result<publish_subscribe::PortFactory<Svc, BoardStartup, ()>> {
     stream(node, service::STARTUP, STARTUP_STREAM)
+}
+
+/// The servo's stream packed for a link.
+pub fn link_servo(node: &Node<Svc>) -> Result<publish_subscribe::PortFactory<Svc, ServoBatch, ()>> {
+    stream(node, service::LINK_SERVO, LINK_STREAM)
+}
+
+/// A request topic of the publish-subscribe form of an estimation service: a slice of samples
+/// behind a header, no history, two requests buffered per subscriber (the servo has one in
+/// flight; a re-send may follow it), four publishers (the servo, a restarted one, the tunnel).
+fn request_topic<Sample, Header>(
+    node: &Node<Svc>,
+    service_name: &str,
+) -> Result<publish_subscribe::PortFactory<Svc, [Sample], Header>>
+where
+    Sample: std::fmt::Debug + ZeroCopySend + 'static,
+    Header: std::fmt::Debug + ZeroCopySend + 'static,
+{
+    node.service_builder(&name(service_name)?)
+        .publish_subscribe::<[Sample]>()
+        .user_header::<Header>()
+        .enable_safe_overflow(true)
+        .history_size(0)
+        .subscriber_max_buffer_size(2)
+        .subscriber_max_borrowed_samples(2)
+        .max_subscribers(4)
+        .max_publishers(4)
+        .max_nodes(8)
+        .open_or_create()
+        .with_context(|| format!("opening service '{service_name}'"))
+}
+
+/// The tangent service's request topic (its publish-subscribe form).
+pub fn tangent_requests(
+    node: &Node<Svc>,
+) -> Result<publish_subscribe::PortFactory<Svc, [ProbeSample], TangentRequestHeader>> {
+    request_topic(node, service::TANGENT_REQUEST)
+}
+
+/// The tangent service's response topic.
+pub fn tangent_responses(
+    node: &Node<Svc>,
+) -> Result<publish_subscribe::PortFactory<Svc, TangentResponse, ()>> {
+    stream(node, service::TANGENT_RESPONSE, RESPONSE_STREAM)
+}
+
+/// The rotation service's request topic.
+pub fn rotation_requests(
+    node: &Node<Svc>,
+) -> Result<publish_subscribe::PortFactory<Svc, [RotationSample], RotationRequestHeader>> {
+    request_topic(node, service::ROTATION_REQUEST)
+}
+
+/// The rotation service's response topic.
+pub fn rotation_responses(
+    node: &Node<Svc>,
+) -> Result<publish_subscribe::PortFactory<Svc, RotationResponse, ()>> {
+    stream(node, service::ROTATION_RESPONSE, RESPONSE_STREAM)
 }
 
 /// An estimation service: requests are a slice of samples behind a header, one response each.

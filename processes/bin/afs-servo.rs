@@ -5,7 +5,7 @@
 //! ```
 //! Normally started by `afs run`; it waits for `afs-sensor` with the same prefix.
 
-use afs::boards::servo::{ServoArgs, ServoEnd, run};
+use afs::boards::servo::{EstimatorVia, ServoArgs, ServoEnd, run};
 use afs::boards::{Common, stop_flag};
 use clap::Parser;
 use std::process::ExitCode;
@@ -31,6 +31,11 @@ struct Cli {
     /// Sends of one request before keeping the old tangent.
     #[arg(long, default_value_t = 10)]
     estimator_attempts: u32,
+    /// How the estimator is reached: `request-response` (iceoryx2 request-response, one host)
+    /// or `topics` (a request and a response topic, which a link to another host carries;
+    /// docs/link.md).
+    #[arg(long, value_enum, default_value_t = EstimatorVia::RequestResponse)]
+    estimator_via: EstimatorVia,
     /// Seconds to wait for the first force sample.
     #[arg(long, default_value_t = 10.0)]
     startup_timeout: f64,
@@ -65,6 +70,7 @@ fn main() -> ExitCode {
             max_force_age_ms: cli.max_force_age_ms,
             estimator_timeout_s: cli.estimator_timeout,
             estimator_attempts: cli.estimator_attempts,
+            estimator_via: cli.estimator_via,
             startup_timeout_s: cli.startup_timeout,
             histograms: cli.histograms.clone(),
             main_ns,

@@ -231,6 +231,24 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Record a running stack's streams to an MCAP file (the topics of `afs run --record`),
+    /// from this host or from another one that its link board reaches (docs/link.md), until the
+    /// stack stops, --duration passes or Ctrl-C. Reports the servo stream's gaps (sequence
+    /// numbers that did not arrive), one JSON object with --json.
+    Record {
+        /// The stack's prefix.
+        #[arg(long, default_value = "afs")]
+        prefix: String,
+        /// The MCAP file to write.
+        #[arg(long)]
+        out: PathBuf,
+        /// Stop after this many seconds (0: when the stack stops).
+        #[arg(long, default_value_t = 0.0)]
+        duration: f64,
+        /// Print the summary as one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
     /// Show a running stack's processes, health and loop statistics.
     Status {
         /// Stack prefix.
@@ -455,6 +473,29 @@ fn run() -> Result<ExitCode> {
                     summary.published.values().sum::<u64>(),
                     summary.dropped,
                     summary.max_clients
+                );
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Record {
+            prefix,
+            out,
+            duration,
+            json,
+        } => {
+            let stop = afs::boards::stop_flag()?;
+            let r = afs::tools::record::record_stack(&prefix, &out, duration, &stop)?;
+            if json {
+                say!("{}", serde_json::to_string_pretty(&r)?);
+            } else {
+                say!(
+                    "recorded {} ({} messages, {} servo samples, {} missing in {} gaps; ended: {})",
+                    r.recording.path.display(),
+                    r.recording.messages.values().sum::<u64>(),
+                    r.servo.received,
+                    r.servo.missing,
+                    r.servo.gaps,
+                    r.ended
                 );
             }
             Ok(ExitCode::SUCCESS)

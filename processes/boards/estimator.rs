@@ -1,5 +1,6 @@
 //! The estimator board: a request-response server for tangent estimation and rotation-centre
-//! estimation, and the on-line friction identification it publishes at about 1 Hz.
+//! estimation (and the same services as request and response topics, which a link to another
+//! host can carry), and the on-line friction identification it publishes at about 1 Hz.
 //!
 //! Stateless as a server: each request carries the whole probe record, the plan and the
 //! settings, so a restarted estimator answers the servo's retry exactly as the first one
@@ -13,10 +14,11 @@ use afs_shared::ident::IdentTick;
 use afs_shared::ident::OnlineFrictionId;
 use afs_shared::math::Vec2;
 use afs_shared::msg::{
-    self, FrictionReport, FrictionStatus, Outcome, RotationResponse, TangentResponse,
+    self, FrictionReport, FrictionStatus, Outcome, RotationRequestHeader, RotationResponse,
+    RotationSample, TangentRequestHeader, TangentResponse,
 };
 use afs_shared::multicontact::estimate_rotation_centre;
-use afs_shared::tangent;
+use afs_shared::tangent::{self, ProbeSample};
 use anyhow::{Context, Result};
 use iceoryx2::port::update_connections::UpdateConnections;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -47,6 +49,24 @@ pub fn run(prefix: &str, mut startup: Startup, stop: &AtomicBool) -> Result<Esti
         .server_builder()
         .create()
         .context("rotation server")?;
+    // The same services as topics, for a servo on another host (docs/link.md): served side by
+    // side with the request-response form, the servo's stack file chooses which it uses.
+    let tangent_topic = ipc::tangent_requests(&node)?
+        .subscriber_builder()
+        .create()
+        .context("tangent request subscriber")?;
+    let tangent_answers = ipc::tangent_responses(&node)?
+        .publisher_builder()
+        .create()
+        .context("tangent response publisher")?;
+    let rotation_topic = ipc::rotation_requests(&node)?
+        .subscriber_builder()
+        .create()
+        .context("rotation request subscriber")?;
+    let rotation_answers = ipc::rotation_responses(&node)?
+        .publisher_builder()
+        .create()
+        .context("rotation response publisher")?;
     let friction_pub = ipc::friction(&node)?
         .publisher_builder()
         .create()
@@ -82,6 +102,10 @@ pub fn run(prefix: &str, mut startup: Startup, stop: &AtomicBool) -> Result<Esti
         // compares a counter.
         let _ = tangent_server.update_connections();
         let _ = rotation_server.update_connections();
+        let _ = tangent_topic.update_connections();
+        let _ = tangent_answers.update_connections();
+        let _ = rotation_topic.update_connections();
+        let _ = rotation_answers.update_connections();
         startup.update_connections();
         while let Ok(Some(s)) = servo_sub.receive() {
             if s.payload().version == msg::VERSION {
@@ -89,81 +113,26 @@ pub fn run(prefix: &str, mut startup: Startup, stop: &AtomicBool) -> Result<Esti
             }
         }
         while let Ok(Some(req)) = tangent_server.receive() {
-            let h = *req.user_header();
-            let answer = if h.version != msg::VERSION {
-                None
-            } else {
-                match (h.plan.to_plan(), h.params.to_params()) {
-                    (Some(plan), Ok(params)) if h.base_angle_rad.is_finite() => {
-                        let outcome = tangent::estimate(
-                            req.payload(),
-                            &plan,
-                            h.base_angle_rad,
-                            &params,
-                            h.reprobe != 0,
-                        );
-                        Some(TangentResponse::from_outcome(h.request_id, &outcome))
-                    }
-                    _ => None,
-                }
-            };
-            let mut r = answer.unwrap_or_else(|| {
-                summary.bad_requests += 1;
-                TangentResponse::bad_request(h.request_id)
-            });
-            r.publish_ns = rt::monotonic_ns();
+            let r = answer_tangent(req.user_header(), req.payload(), &mut summary);
             if req.send_copy(r).is_ok() {
                 summary.tangent_requests += 1;
             }
         }
-        while let Ok(Some(req)) = rotation_server.receive() {
-            let h = *req.user_header();
-            let n = (h.centres as usize).min(msg::MAX_CENTRES);
-            let mut r = RotationResponse {
-                version: msg::VERSION,
-                request_id: h.request_id,
-                outcome: Outcome::BadRequest.into(),
-                centre_m: [f64::NAN; 2],
-                thesis_centre_m: [f64::NAN; 2],
-                response_matrix: [f64::NAN; 4],
-                coupling: f64::NAN,
-                ..Default::default()
-            };
-            if h.version == msg::VERSION && n >= 3 {
-                let centres: Vec<Vec2> = h.centre_m[..n]
-                    .iter()
-                    .map(|c| Vec2::new(c[0], c[1]))
-                    .collect();
-                let samples: Vec<(usize, f64, f64, Vec2)> = req
-                    .payload()
-                    .iter()
-                    .map(|s| {
-                        (
-                            s.dither as usize,
-                            s.t,
-                            s.phase,
-                            Vec2::new(s.force_n[0], s.force_n[1]),
-                        )
-                    })
-                    .collect();
-                r.outcome = Outcome::Failed.into();
-                if let Some(e) =
-                    estimate_rotation_centre(&centres, &samples, h.amplitude_rad, h.suppression_hz)
-                {
-                    r.outcome = Outcome::Estimate.into();
-                    r.centre_m = [e.centre.x, e.centre.y];
-                    if let Some(t) = e.thesis_centre {
-                        r.thesis_centre_m = [t.x, t.y];
-                    }
-                    let a = e.response_matrix;
-                    r.response_matrix = [a[(0, 0)], a[(0, 1)], a[(1, 0)], a[(1, 1)]];
-                    r.coupling = e.coupling;
-                }
-            } else {
-                summary.bad_requests += 1;
+        while let Ok(Some(req)) = tangent_topic.receive() {
+            let r = answer_tangent(req.user_header(), req.payload(), &mut summary);
+            if tangent_answers.send_copy(r).is_ok() {
+                summary.tangent_requests += 1;
             }
-            r.publish_ns = rt::monotonic_ns();
+        }
+        while let Ok(Some(req)) = rotation_server.receive() {
+            let r = answer_rotation(req.user_header(), req.payload(), &mut summary);
             if req.send_copy(r).is_ok() {
+                summary.rotation_requests += 1;
+            }
+        }
+        while let Ok(Some(req)) = rotation_topic.receive() {
+            let r = answer_rotation(req.user_header(), req.payload(), &mut summary);
+            if rotation_answers.send_copy(r).is_ok() {
                 summary.rotation_requests += 1;
             }
         }
@@ -195,4 +164,85 @@ pub fn run(prefix: &str, mut startup: Startup, stop: &AtomicBool) -> Result<Esti
         }
     }
     Ok(summary)
+}
+
+/// The answer to a tangent request (its header and probe record), stamped; a malformed request
+/// gets a refusal and is counted.
+fn answer_tangent(
+    h: &TangentRequestHeader,
+    samples: &[ProbeSample],
+    summary: &mut EstimatorSummary,
+) -> TangentResponse {
+    let answer = if h.version != msg::VERSION {
+        None
+    } else {
+        match (h.plan.to_plan(), h.params.to_params()) {
+            (Some(plan), Ok(params)) if h.base_angle_rad.is_finite() => {
+                let outcome =
+                    tangent::estimate(samples, &plan, h.base_angle_rad, &params, h.reprobe != 0);
+                Some(TangentResponse::from_outcome(h.request_id, &outcome))
+            }
+            _ => None,
+        }
+    };
+    let mut r = answer.unwrap_or_else(|| {
+        summary.bad_requests += 1;
+        TangentResponse::bad_request(h.request_id)
+    });
+    r.publish_ns = rt::monotonic_ns();
+    r
+}
+
+/// The answer to a rotation request (its header and dither record), stamped; a malformed
+/// request gets a refusal and is counted.
+fn answer_rotation(
+    h: &RotationRequestHeader,
+    samples: &[RotationSample],
+    summary: &mut EstimatorSummary,
+) -> RotationResponse {
+    let n = (h.centres as usize).min(msg::MAX_CENTRES);
+    let mut r = RotationResponse {
+        version: msg::VERSION,
+        request_id: h.request_id,
+        outcome: Outcome::BadRequest.into(),
+        centre_m: [f64::NAN; 2],
+        thesis_centre_m: [f64::NAN; 2],
+        response_matrix: [f64::NAN; 4],
+        coupling: f64::NAN,
+        ..Default::default()
+    };
+    if h.version == msg::VERSION && n >= 3 {
+        let centres: Vec<Vec2> = h.centre_m[..n]
+            .iter()
+            .map(|c| Vec2::new(c[0], c[1]))
+            .collect();
+        let samples: Vec<(usize, f64, f64, Vec2)> = samples
+            .iter()
+            .map(|s| {
+                (
+                    s.dither as usize,
+                    s.t,
+                    s.phase,
+                    Vec2::new(s.force_n[0], s.force_n[1]),
+                )
+            })
+            .collect();
+        r.outcome = Outcome::Failed.into();
+        if let Some(e) =
+            estimate_rotation_centre(&centres, &samples, h.amplitude_rad, h.suppression_hz)
+        {
+            r.outcome = Outcome::Estimate.into();
+            r.centre_m = [e.centre.x, e.centre.y];
+            if let Some(t) = e.thesis_centre {
+                r.thesis_centre_m = [t.x, t.y];
+            }
+            let a = e.response_matrix;
+            r.response_matrix = [a[(0, 0)], a[(0, 1)], a[(1, 0)], a[(1, 1)]];
+            r.coupling = e.coupling;
+        }
+    } else {
+        summary.bad_requests += 1;
+    }
+    r.publish_ns = rt::monotonic_ns();
+    r
 }

@@ -3,6 +3,7 @@
 
 pub mod bench;
 pub mod experiment;
+pub mod follow;
 pub mod plot;
 pub mod record;
 pub mod sensor;

@@ -472,3 +472,73 @@ mod schema_tests {
         assert_eq!(props["safe"]["type"], "boolean");
     }
 }
+
+/// What `afs record` did: the recording, and the servo stream's sequence numbers as they
+/// arrived (every gap counted and placed).
+#[derive(Debug, Clone, Serialize)]
+pub struct StackRecording {
+    /// The file and what it holds.
+    pub recording: RecordSummary,
+    /// The servo samples' numbers (`seq`).
+    pub servo: afs_shared::batch::SeqGaps,
+    /// Why it ended: `stopping` (the supervisor said so), `gone` (no node of the stack
+    /// left), `interrupted` (Ctrl-C) or `duration`.
+    pub ended: String,
+    /// Wall time recorded (s).
+    pub seconds: f64,
+}
+
+/// Records a running stack (every stream, as `afs run --record` does) to `path` until it
+/// stops, `duration_s` passes (0: no limit) or `stop` is set.
+pub fn record_stack(
+    prefix: &str,
+    path: &Path,
+    duration_s: f64,
+    stop: &std::sync::atomic::AtomicBool,
+) -> Result<StackRecording> {
+    use super::follow::{Ended, Follower};
+    use std::sync::atomic::Ordering;
+    use std::time::{Duration, Instant};
+    if !(duration_s.is_finite() && duration_s >= 0.0) {
+        anyhow::bail!(
+            "--duration {duration_s} must be a number of seconds ≥ 0 (0: until the stack stops)"
+        );
+    }
+    let mut follower = Follower::open(prefix, "record")?;
+    let mut rec = Recorder::start(path)?;
+    let mut servo = afs_shared::batch::SeqGaps::default();
+    let t0 = Instant::now();
+    let ended = loop {
+        if stop.load(Ordering::Relaxed) {
+            break "interrupted";
+        }
+        if duration_s > 0.0 && t0.elapsed().as_secs_f64() >= duration_s {
+            break "duration";
+        }
+        std::thread::sleep(Duration::from_millis(5));
+        let end = follower.poll(|r| {
+            if let Rec::Servo(s) = &r {
+                servo.push(s.seq);
+            }
+            rec.push(r);
+        });
+        match end {
+            Ok(Some(Ended::Stopping)) => break "stopping",
+            Ok(Some(Ended::Gone)) => break "gone",
+            Ok(None) => {}
+            Err(e) => {
+                follower.close();
+                rec.finish()?;
+                return Err(e);
+            }
+        }
+    };
+    let seconds = t0.elapsed().as_secs_f64();
+    follower.close();
+    Ok(StackRecording {
+        recording: rec.finish()?,
+        servo,
+        ended: ended.to_string(),
+        seconds,
+    })
+}

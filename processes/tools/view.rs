@@ -11,11 +11,11 @@
 //! controller at the same ticks, so the two stay paired); the low-rate streams pass whole.
 //! Nothing is encoded while no client subscribes to a topic.
 
+use super::follow::{Ended, Follower};
 use super::record::{Rec, TOPICS, json_schema};
-use crate::{ipc, rt};
-use afs_shared::join::Joiner;
+use crate::rt;
 use afs_shared::live::LiveSample;
-use afs_shared::msg::{PlantSample, ServoSample, SupervisorPhase};
+use afs_shared::msg::{PlantSample, ServoSample};
 use anyhow::{Context, Result, bail};
 use foxglove::{ChannelBuilder, Context as FoxContext, PartialMetadata, RawChannel, Schema};
 use serde::{Deserialize, Serialize};
@@ -25,7 +25,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
 use std::thread::JoinHandle;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// Foxglove's usual port.
 pub const DEFAULT_ADDR: &str = "127.0.0.1:8765";
@@ -315,128 +315,26 @@ fn serve(
 /// set. Reads its streams as one more subscriber (history 1 on the status streams, so the
 /// latest statistics show at once).
 pub fn attach(prefix: &str, settings: ViewSettings, stop: &AtomicBool) -> Result<ViewSummary> {
-    ipc::check_prefix(prefix)?;
-    if ipc::census(prefix, false)?.alive.is_empty() {
-        bail!(
-            "no stack with prefix '{prefix}' is running; start one with `afs run --prefix {prefix}`"
-        );
-    }
-    let node = ipc::node(prefix, "view")?;
-    let sub = |what: &str| format!("creating the view's {what} subscriber");
-    let plant = ipc::plant(&node)?
-        .subscriber_builder()
-        .create()
-        .with_context(|| sub("world"))?;
-    let servo = ipc::servo(&node)?
-        .subscriber_builder()
-        .create()
-        .with_context(|| sub("controller"))?;
-    let wrench = ipc::wrench(&node)?
-        .subscriber_builder()
-        .create()
-        .with_context(|| sub("force"))?;
-    let stats = ipc::loop_stats(&node)?
-        .subscriber_builder()
-        .create()
-        .with_context(|| sub("loop-statistics"))?;
-    let sensor_stats = ipc::sensor_stats(&node)?
-        .subscriber_builder()
-        .create()
-        .with_context(|| sub("sensor-statistics"))?;
-    let friction = ipc::friction(&node)?
-        .subscriber_builder()
-        .create()
-        .with_context(|| sub("friction"))?;
-    let status = ipc::supervisor(&node)?
-        .subscriber_builder()
-        .create()
-        .with_context(|| sub("status"))?;
+    let mut follower = Follower::open(prefix, "view")?;
     // Keep off the cores the stack's boards are pinned to.
-    let mut avoid: Vec<usize> = ipc::census(prefix, false)?
-        .alive
-        .iter()
-        .filter_map(|(_, pid)| rt::pinned_cpu(*pid))
-        .collect();
-    avoid.sort_unstable();
-    avoid.dedup();
+    let avoid = follower.pinned_cpus()?;
     let mut view = LiveView::start(settings, None, &format!("afs {prefix}"), &avoid)?;
     eprintln!("afs: live view of stack '{prefix}' at {}", view.url());
-    let mut joiner = Joiner::default();
-    let mut heard = Instant::now();
     while !stop.load(Ordering::Relaxed) {
         std::thread::sleep(Duration::from_millis(5));
-        let mut any = false;
-        while let Ok(Some(s)) = plant.receive() {
-            any = true;
-            let p = *s.payload();
-            if !joiner.is_repeat(&p) {
-                view.push(Rec::Plant(p));
-                joiner.push_plant(p);
+        match follower.poll(|r| view.push(r))? {
+            Some(Ended::Stopping) => {
+                eprintln!("afs: stack '{prefix}' is stopping");
+                break;
             }
-        }
-        while let Ok(Some(s)) = servo.receive() {
-            any = true;
-            view.push(Rec::Servo(*s.payload()));
-            joiner.push_servo(*s.payload());
-        }
-        joiner.pairs(|p, s| {
-            if let Some(r) = live(p, s) {
-                view.push(r);
-            }
-        });
-        while let Ok(Some(s)) = wrench.receive() {
-            any = true;
-            view.push(Rec::Wrench(*s.payload()));
-        }
-        while let Ok(Some(s)) = stats.receive() {
-            view.push(Rec::Stats(*s.payload()));
-        }
-        while let Ok(Some(s)) = sensor_stats.receive() {
-            view.push(Rec::SensorStats(*s.payload()));
-        }
-        while let Ok(Some(s)) = friction.receive() {
-            view.push(Rec::Friction(*s.payload()));
-        }
-        let mut stopping = false;
-        while let Ok(Some(s)) = status.receive() {
-            any = true;
-            let st = *s.payload();
-            view.push(Rec::Status(st));
-            stopping |= SupervisorPhase::try_from(st.phase) == Ok(SupervisorPhase::Stopping);
-        }
-        if stopping {
-            eprintln!("afs: stack '{prefix}' is stopping");
-            break;
-        }
-        if any {
-            heard = Instant::now();
-        } else if heard.elapsed() > Duration::from_secs(2) {
-            // Silent for 2 s: ended, or between a board's death and its restart.
-            let others = ipc::census(prefix, false)?
-                .alive
-                .iter()
-                .filter(|(n, _)| n != "view")
-                .count();
-            if others == 0 {
+            Some(Ended::Gone) => {
                 eprintln!("afs: stack '{prefix}' ended");
                 break;
             }
-            heard = Instant::now();
+            None => {}
         }
     }
-    // Leave the prefix as the supervisor would if this was its last node (the supervisor
-    // was killed): iceoryx2 keeps the node counter, which is removed by name.
-    drop((
-        plant,
-        servo,
-        wrench,
-        stats,
-        sensor_stats,
-        friction,
-        status,
-        node,
-    ));
-    let _ = ipc::release_prefix(prefix);
+    follower.close();
     Ok(view.finish())
 }
 

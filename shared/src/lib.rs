@@ -5,6 +5,7 @@
 mod wire;
 
 pub mod arm;
+pub mod batch;
 pub mod check;
 pub mod correlation;
 pub mod dither;

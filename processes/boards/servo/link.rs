@@ -1,6 +1,11 @@
 //! The servo's side of the estimator's tangent service: the probe record copied into a loaned
 //! request over several ticks, sent, waited for, re-sent after a time-out, given up after the
 //! last attempt. Nothing here allocates or blocks.
+//!
+//! The service has two forms with the same semantics: iceoryx2 request-response (the
+//! default), and a request topic with a response topic matched by request id, which a link to
+//! another host can carry (docs/link.md). For the servo a slow or cut link is a slow or dead
+//! estimator: the same time-out, retries and give-up.
 
 use crate::ipc::{self, Svc};
 use crate::rt;
@@ -9,8 +14,11 @@ use afs_shared::servo::{ServoCore, ServoMode};
 use afs_shared::tangent::ProbeSample;
 use iceoryx2::pending_response::PendingResponse;
 use iceoryx2::port::client::Client;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::request_mut_uninit::RequestMutUninit;
+use iceoryx2::sample_mut_uninit::SampleMutUninit;
 use std::mem::MaybeUninit;
 
 pub(super) type TangentClient =
@@ -19,6 +27,58 @@ type TangentLoan =
     RequestMutUninit<Svc, [MaybeUninit<ProbeSample>], TangentRequestHeader, TangentResponse, ()>;
 type TangentPending =
     PendingResponse<Svc, [ProbeSample], TangentRequestHeader, TangentResponse, ()>;
+pub(super) type RequestPublisher = Publisher<Svc, [ProbeSample], TangentRequestHeader>;
+pub(super) type ResponseSubscriber = Subscriber<Svc, TangentResponse, ()>;
+type TopicLoan = SampleMutUninit<Svc, [MaybeUninit<ProbeSample>], TangentRequestHeader>;
+
+/// How the servo reaches the estimator.
+pub(super) enum Transport {
+    /// iceoryx2 request-response (one host).
+    RequestResponse(TangentClient),
+    /// A request topic and a response topic (across a link).
+    Topics {
+        requests: RequestPublisher,
+        responses: ResponseSubscriber,
+    },
+}
+
+/// A request being filled, in either form.
+enum Loan {
+    Rpc(TangentLoan),
+    Topic(TopicLoan),
+}
+
+impl Loan {
+    fn header_mut(&mut self) -> &mut TangentRequestHeader {
+        match self {
+            Loan::Rpc(l) => l.user_header_mut(),
+            Loan::Topic(l) => l.user_header_mut(),
+        }
+    }
+
+    fn payload_mut(&mut self) -> &mut [MaybeUninit<ProbeSample>] {
+        match self {
+            Loan::Rpc(l) => l.payload_mut(),
+            Loan::Topic(l) => l.payload_mut(),
+        }
+    }
+
+    /// Sends it (every element written); the pending response of the request-response form.
+    ///
+    /// # Safety
+    /// Every element of the payload must have been written.
+    unsafe fn send(self) -> Result<Option<TangentPending>, ()> {
+        match self {
+            // SAFETY: the caller wrote every element.
+            Loan::Rpc(l) => unsafe { l.assume_init() }.send().map(Some).map_err(|_| ()),
+            // SAFETY: the caller wrote every element.
+            Loan::Topic(l) => unsafe { l.assume_init() }
+                .send()
+                .map(|_| None)
+                .map_err(|_| ()),
+        }
+    }
+}
 
 /// Samples copied into a request per tick: about 57 kB, a few microseconds.
 const COPY_PER_TICK: usize = 1024;
@@ -26,11 +86,12 @@ const COPY_PER_TICK: usize = 1024;
 enum Link {
     Idle,
     Copying {
-        loan: TangentLoan,
+        loan: Loan,
         next: usize,
     },
     Waiting {
-        pending: TangentPending,
+        /// None in the topic form: the answer comes on the response topic.
+        pending: Option<TangentPending>,
         sent_ns: u64,
     },
 }
@@ -39,7 +100,7 @@ enum Link {
 /// over several ticks, sends it, waits, re-sends after a time-out, gives up after the last
 /// attempt.
 pub(super) struct EstimatorLink {
-    client: TangentClient,
+    transport: Transport,
     state: Link,
     request_id: u64,
     attempt: u32,
@@ -54,10 +115,10 @@ pub(super) struct EstimatorLink {
 }
 
 impl EstimatorLink {
-    /// A link over `client` that re-sends after `timeout_s` and gives up after `attempts`.
-    pub(super) fn new(client: TangentClient, timeout_s: f64, attempts: u32) -> Self {
+    /// A link over `transport` that re-sends after `timeout_s` and gives up after `attempts`.
+    pub(super) fn new(transport: Transport, timeout_s: f64, attempts: u32) -> Self {
         Self {
-            client,
+            transport,
             state: Link::Idle,
             request_id: 0,
             attempt: 0,
@@ -76,7 +137,51 @@ impl EstimatorLink {
 
     /// Drops the connections of an estimator that died and connects a restarted one.
     pub(super) fn update_connections(&self) {
-        let _ = self.client.update_connections();
+        match &self.transport {
+            Transport::RequestResponse(c) => {
+                let _ = c.update_connections();
+            }
+            Transport::Topics {
+                requests,
+                responses,
+            } => {
+                let _ = requests.update_connections();
+                let _ = responses.update_connections();
+            }
+        }
+    }
+
+    /// Loans a request of `len` samples.
+    fn loan(&self, len: usize) -> Option<Loan> {
+        match &self.transport {
+            Transport::RequestResponse(c) => c.loan_slice_uninit(len).ok().map(Loan::Rpc),
+            Transport::Topics { requests, .. } => {
+                requests.loan_slice_uninit(len).ok().map(Loan::Topic)
+            }
+        }
+    }
+
+    /// The answer to the request in flight, if it came (older answers are passed over).
+    fn answer(&self, pending: Option<&TangentPending>) -> Option<TangentResponse> {
+        let mut answer = None;
+        match (pending, &self.transport) {
+            (Some(p), _) => {
+                while let Ok(Some(r)) = p.receive() {
+                    if r.payload().request_id == self.request_id {
+                        answer = Some(*r.payload());
+                    }
+                }
+            }
+            (None, Transport::Topics { responses, .. }) => {
+                while let Ok(Some(r)) = responses.receive() {
+                    if r.payload().request_id == self.request_id {
+                        answer = Some(*r.payload());
+                    }
+                }
+            }
+            (None, Transport::RequestResponse(_)) => {}
+        }
+        answer
     }
 
     /// Moves the request along by one tick.
@@ -96,10 +201,10 @@ impl EstimatorLink {
                     self.request_id += 1;
                 }
                 let len = req.samples.len().min(ipc::MAX_PROBE_SAMPLES);
-                match self.client.loan_slice_uninit(len) {
-                    Ok(mut loan) => {
+                match self.loan(len) {
+                    Some(mut loan) => {
                         let tangent = servo.params().tangent;
-                        *loan.user_header_mut() = TangentRequestHeader {
+                        *loan.header_mut() = TangentRequestHeader {
                             version: msg::VERSION,
                             reprobe: u32::from(req.reprobe),
                             request_id: self.request_id,
@@ -113,7 +218,7 @@ impl EstimatorLink {
                         Link::Copying { loan, next: 0 }
                     }
                     // No memory to loan (should not happen: static allocation): try next tick.
-                    Err(_) => Link::Idle,
+                    None => Link::Idle,
                 }
             }
             Link::Copying { mut loan, next } => {
@@ -128,10 +233,9 @@ impl EstimatorLink {
                 if end < dst.len() {
                     Link::Copying { loan, next: end }
                 } else {
-                    loan.user_header_mut().publish_ns = rt::monotonic_ns();
+                    loan.header_mut().publish_ns = rt::monotonic_ns();
                     // SAFETY: every element of the slice was written above.
-                    let request = unsafe { loan.assume_init() };
-                    match request.send() {
+                    match unsafe { loan.send() } {
                         Ok(pending) => {
                             self.requests += 1;
                             Link::Waiting {
@@ -144,13 +248,7 @@ impl EstimatorLink {
                 }
             }
             Link::Waiting { pending, sent_ns } => {
-                let mut answer = None;
-                while let Ok(Some(r)) = pending.receive() {
-                    if r.payload().request_id == self.request_id {
-                        answer = Some(*r.payload());
-                    }
-                }
-                if let Some(a) = answer {
+                if let Some(a) = self.answer(pending.as_ref()) {
                     self.answers += 1;
                     self.attempt = 0;
                     match a.to_outcome() {

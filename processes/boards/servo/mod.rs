@@ -33,6 +33,16 @@ use timing::{Timing, publish_stats};
 /// Default time the estimator has to answer before a request is re-sent (s).
 pub const ESTIMATOR_TIMEOUT_S: f64 = 1.0;
 
+/// How the servo reaches the estimator's tangent service.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum EstimatorVia {
+    /// iceoryx2 request-response: the estimator on the same host.
+    RequestResponse,
+    /// A request topic and a response topic: the estimator on the same host or, through the
+    /// link board, on another (docs/link.md).
+    Topics,
+}
+
 /// How the servo runs.
 #[derive(Debug, Clone)]
 pub struct ServoArgs {
@@ -56,6 +66,8 @@ pub struct ServoArgs {
     pub estimator_timeout_s: f64,
     /// Sends of one request before giving up and keeping the old tangent.
     pub estimator_attempts: u32,
+    /// How the estimator is reached.
+    pub estimator_via: EstimatorVia,
     /// Time to wait for the first force sample (s).
     pub startup_timeout_s: f64,
     /// Save the wake, execution-time and force-age histograms here at the end.
@@ -107,12 +119,30 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
         .buffer_size(256)
         .create()
         .context("wrench subscriber")?;
-    let client = ipc::tangent(&node)?
-        .client_builder()
-        .initial_max_slice_len(ipc::MAX_PROBE_SAMPLES)
-        .allocation_strategy(AllocationStrategy::Static)
-        .create()
-        .context("tangent client")?;
+    let transport = match args.estimator_via {
+        EstimatorVia::RequestResponse => link::Transport::RequestResponse(
+            ipc::tangent(&node)?
+                .client_builder()
+                .initial_max_slice_len(ipc::MAX_PROBE_SAMPLES)
+                .allocation_strategy(AllocationStrategy::Static)
+                .create()
+                .context("tangent client")?,
+        ),
+        EstimatorVia::Topics => link::Transport::Topics {
+            requests: ipc::tangent_requests(&node)?
+                .publisher_builder()
+                .initial_max_slice_len(ipc::MAX_PROBE_SAMPLES)
+                .allocation_strategy(AllocationStrategy::Static)
+                .backpressure_strategy(ipc::BACKPRESSURE)
+                .max_loaned_samples(1)
+                .create()
+                .context("tangent request publisher")?,
+            responses: ipc::tangent_responses(&node)?
+                .subscriber_builder()
+                .create()
+                .context("tangent response subscriber")?,
+        },
+    };
     let command_sub = ipc::command(&node)?
         .subscriber_builder()
         .buffer_size(16)
@@ -277,7 +307,7 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
         }
     }
     servo.set_tare(first.tare());
-    let mut link = EstimatorLink::new(client, args.estimator_timeout_s, args.estimator_attempts);
+    let mut link = EstimatorLink::new(transport, args.estimator_timeout_s, args.estimator_attempts);
     let mut timing = Timing::new()?;
     let rtr = rt::setup(args.priority, true, args.cpu);
     startup.report.rt_ns = Startup::now();

@@ -13,12 +13,14 @@
 
 mod estimation;
 mod layout;
+mod link;
 mod samples;
 mod status;
 mod world;
 
 pub use estimation::*;
 pub use layout::*;
+pub use link::*;
 pub use samples::*;
 pub use status::*;
 pub use world::*;
@@ -53,6 +55,20 @@ pub mod service {
     pub const STARTUP: &str = "afs/boards/startup";
     /// [`ServoCommand`], on demand (supervisor, clients → servo).
     pub const COMMAND: &str = "afs/servo/command";
+    /// [`ServoBatch`](super::ServoBatch): the servo's stream packed for a link to another
+    /// host (link board → link board, docs/link.md).
+    pub const LINK_SERVO: &str = "afs/link/servo";
+    /// The tangent service as two topics, for an estimator on another host (a link carries
+    /// publish-subscribe only): [`TangentRequestHeader`](super::TangentRequestHeader) +
+    /// `[ProbeSample]` (servo → estimator) ...
+    pub const TANGENT_REQUEST: &str = "afs/estimator/tangent/request";
+    /// ... and [`TangentResponse`](super::TangentResponse) (estimator → servo).
+    pub const TANGENT_RESPONSE: &str = "afs/estimator/tangent/response";
+    /// The rotation service as two topics: [`RotationRequestHeader`](super::RotationRequestHeader)
+    /// + `[RotationSample]` ...
+    pub const ROTATION_REQUEST: &str = "afs/estimator/rotation/request";
+    /// ... and [`RotationResponse`](super::RotationResponse).
+    pub const ROTATION_RESPONSE: &str = "afs/estimator/rotation/response";
     /// Blackboard of the world's state (key 0: [`WorldSnapshot`](super::WorldSnapshot)),
     /// owned by the supervisor, written by the servo.
     pub const WORLD: &str = "afs/plant/world";

@@ -1,0 +1,180 @@
+#!/usr/bin/env bash
+# Two hosts on one machine (docs/link.md): host A is this machine as it is (servo, sensor and
+# the link board, started by `afs run`); host B is a network namespace joined to it by a veth
+# pair, with a mount namespace of its own whose /dev/shm and iceoryx2 root are empty tmpfs, so
+# the two hosts share no shared memory at all and talk through the link only. Host B runs the
+# estimator, its own link board, and an observer that records the stack (`afs record`). The
+# scenario runs; one JSON summary is printed on stdout.
+#
+#   sudo examples/two-hosts.sh [--scenario surface-tracking] [--duration 30] [--seed 1]
+#        [--prefix P] [--bin target/release] [--cut-at S --cut-for S] [--keep]
+#
+# --cut-at/--cut-for take host A's end of the veth pair down for a while (a cut link).
+# Everything the script makes (namespace, veth pair, processes, files) is removed at the end
+# unless --keep. Nothing leaves the machine: zenoh listens and connects on the veth pair's
+# addresses only, with multicast and gossip scouting off. Exit status: 0 when the run passed
+# and host B's recording has no gap but where the link was cut, 1 otherwise, 2 on an error.
+set -euo pipefail
+
+scenario=surface-tracking
+duration=30
+seed=1
+prefix="twohosts$$"
+bin="$(cd "$(dirname "$0")/.." && pwd)/target/release"
+cut_at=""
+cut_for=""
+keep=0
+die() { echo "two-hosts: error: $*" >&2; exit 2; }
+while [ $# -gt 0 ]; do
+    case "$1" in
+        --scenario) scenario="$2"; shift 2 ;;
+        --duration) duration="$2"; shift 2 ;;
+        --seed) seed="$2"; shift 2 ;;
+        --prefix) prefix="$2"; shift 2 ;;
+        --bin) bin="$2"; shift 2 ;;
+        --cut-at) cut_at="$2"; shift 2 ;;
+        --cut-for) cut_for="$2"; shift 2 ;;
+        --keep) keep=1; shift ;;
+        -h|--help) sed -n '2,18p' "$0"; exit 0 ;;
+        *) die "unknown option '$1' (see --help)" ;;
+    esac
+done
+[ "$(id -u)" -eq 0 ] || die "run as root: host B is a network and mount namespace"
+for b in afs afs-servo afs-sensor afs-estimator afs-link; do
+    [ -x "$bin/$b" ] || die "$bin/$b is missing: build with \`cargo build --release --workspace\`"
+done
+for t in ip unshare nsenter python3; do
+    command -v "$t" >/dev/null || die "'$t' is needed"
+done
+if [ -n "$cut_at" ] && [ -z "$cut_for" ]; then die "--cut-at needs --cut-for"; fi
+
+work="$(mktemp -d /tmp/afs-two-hosts.XXXXXX)"
+tag="$(printf '%05d' $(($$ % 100000)))"
+ns="afs-b-$tag"
+veth_a="afsa$tag"
+veth_b="afsb$tag"
+# A /30 of 10.250.0.0/16 per run, from the pid.
+net=$(($$ % 16384))
+a_ip="10.250.$((net / 64)).$(((net % 64) * 4 + 1))"
+b_ip="10.250.$((net / 64)).$(((net % 64) * 4 + 2))"
+port=7447
+hold=""
+pids=()
+
+cleanup() {
+    set +e
+    for p in "${pids[@]}"; do kill -TERM "$p" 2>/dev/null; done
+    sleep 0.5
+    for p in "${pids[@]}"; do kill -KILL "$p" 2>/dev/null; done
+    [ -n "$hold" ] && kill -KILL "$hold" 2>/dev/null
+    ip link del "$veth_a" 2>/dev/null
+    ip netns del "$ns" 2>/dev/null
+    if [ "$keep" -eq 0 ]; then rm -rf "$work"; else echo "two-hosts: files kept in $work" >&2; fi
+}
+trap cleanup EXIT
+trap 'exit 2' INT TERM
+
+# The link: a veth pair, host A's end here, host B's in its namespace.
+ip netns add "$ns"
+ip link add "$veth_a" type veth peer name "$veth_b" netns "$ns"
+ip addr add "$a_ip/30" dev "$veth_a"
+ip link set "$veth_a" up
+ip -n "$ns" addr add "$b_ip/30" dev "$veth_b"
+ip -n "$ns" link set "$veth_b" up
+ip -n "$ns" link set lo up
+
+# Host B: a process holding its namespaces, with empty tmpfs on /dev/shm and the iceoryx2 root.
+ip netns exec "$ns" unshare --mount --propagation private sh -c \
+    'mount -t tmpfs afs-b-shm /dev/shm && mkdir -p /tmp/iceoryx2 && mount -t tmpfs afs-b-iox2 /tmp/iceoryx2 && echo ready > "$0" && exec sleep 100000' \
+    "$work/b.ready" &
+hold=$!
+disown "$hold"
+for _ in $(seq 100); do [ -s "$work/b.ready" ] && break; sleep 0.05; done
+[ -s "$work/b.ready" ] || die "host B's namespace did not come up"
+# Runs a command on host B, in place of the calling (sub)shell, so that `$!` is its pid.
+on_b() { exec nsenter -t "$hold" -m -n -- "$@"; }
+
+# Host B's boards and observer.
+# (Stopped in this order at the end: the link board last, as it leaves the prefix clean.)
+on_b "$bin/afs-estimator" --prefix "$prefix" --scenario "$scenario" --seed "$seed" \
+    2>"$work/b-estimator.log" &
+pids+=($!)
+on_b "$bin/afs-link" --prefix "$prefix" --side remote --listen "tcp/$b_ip:$port" \
+    --connect "tcp/$a_ip:$port" --summary "$work/b-link.json" 2>"$work/b-link.log" &
+pids+=($!)
+sleep 0.3
+on_b "$bin/afs" record --prefix "$prefix" --out "$work/b.mcap" --json \
+    >"$work/b-record.json" 2>"$work/b-record.log" &
+record_pid=$!
+pids+=("$record_pid")
+
+# Host A: the stack file with the link board on host A's address.
+sed "s#tcp/127.0.0.1:7447#tcp/$a_ip:$port#" "$(dirname "$0")/stack-two-hosts.toml" >"$work/host-a.toml"
+if [ -n "$cut_at" ]; then
+    ( sleep "$cut_at"; ip link set "$veth_a" down; sleep "$cut_for"; ip link set "$veth_a" up ) &
+    pids+=($!)
+fi
+set +e
+"$bin/afs" run --config "$work/host-a.toml" --prefix "$prefix" --scenario "$scenario" \
+    --duration "$duration" --seed "$seed" --json >"$work/a-run.json" 2>"$work/a-run.log"
+run_status=$?
+set -e
+
+# Host B's observer leaves when host A's supervisor says it stops; then its boards.
+for _ in $(seq 200); do kill -0 "$record_pid" 2>/dev/null || break; sleep 0.05; done
+for p in "${pids[@]}"; do
+    kill -TERM "$p" 2>/dev/null || true
+    for _ in $(seq 100); do kill -0 "$p" 2>/dev/null || break; sleep 0.05; done
+    if kill -0 "$p" 2>/dev/null; then
+        echo "two-hosts: warning: pid $p did not stop on SIGTERM within 5 s, killed" >&2
+        kill -KILL "$p" 2>/dev/null || true
+    fi
+    wait "$p" 2>/dev/null || true
+done
+pids=()
+# What the stack's processes left on host B (nothing, when they stop cleanly).
+leftover=$(on_b sh -c 'find /dev/shm /tmp/iceoryx2 -name "afs_*" 2>/dev/null | tr "\n" " "' || true)
+
+python3 - "$work" "$run_status" "$leftover" "${cut_at:-}" "${cut_for:-}" <<'EOF'
+import json, sys, os
+work, run_status, leftover, cut_at, cut_for = sys.argv[1:6]
+def load(name):
+    try:
+        with open(os.path.join(work, name)) as f:
+            return json.load(f)
+    except Exception as e:
+        return {"error": f"{name}: {e}"}
+a, rec, link = load("a-run.json"), load("b-record.json"), load("b-link.json")
+procs = {p.get("name"): p for p in a.get("processes", [])} if "processes" in a else {}
+servo = rec.get("servo", {})
+cut = bool(cut_at)
+out = {
+    "passed": False,
+    "run": {
+        "exit_status": int(run_status),
+        "passed": a.get("passed"),
+        "scenario": a.get("scenario"),
+        "failed_checks": [c.get("name") for c in a.get("checks", []) if not c.get("pass")],
+        "estimates": a.get("stack", {}).get("tracking", {}).get("estimations", {}).get("estimates"),
+        "agreement": a.get("agreement"),
+        "link_board_restarts": procs.get("link", {}).get("restarts"),
+    },
+    "host_b": {
+        "recording": rec.get("recording"),
+        "ended": rec.get("ended"),
+        "servo_samples": servo.get("received"),
+        "servo_missing": servo.get("missing"),
+        "servo_gaps": servo.get("first_gaps"),
+        "link": link,
+        "leftover_files": leftover.split(),
+    },
+    "cut": {"at_s": float(cut_at), "for_s": float(cut_for)} if cut else None,
+}
+no_gap_but_cut = servo.get("missing", 1) == 0 or (cut and servo.get("gaps", 0) >= 1)
+estimates = out["run"]["estimates"] or 0
+out["passed"] = bool(a.get("passed")) and int(run_status) == 0 and estimates >= 1 \
+    and bool((a.get("agreement") or {}).get("agrees")) and (servo.get("received") or 0) > 0 \
+    and no_gap_but_cut and not leftover.split() and rec.get("ended") == "stopping"
+print(json.dumps(out, indent=2))
+sys.exit(0 if out["passed"] else 1)
+EOF

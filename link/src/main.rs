@@ -1,0 +1,342 @@
+//! `afs-link`: the link board. It carries a stack's services to and from another host through
+//! iceoryx2's own tunnel over zenoh (the crates behind upstream's `iox2 link tunnel zenoh`),
+//! admitting only the services that are meant to cross, and packs the servo's per-tick stream
+//! into batches for the way (docs/link.md).
+//!
+//! ```text
+//! # the controller's host (A), started by `afs run` from the stack file:
+//! afs-link --prefix P --side controller --listen tcp/10.0.0.1:7447
+//! # the remote host (B), with the estimator and observers:
+//! afs-link --prefix P --side remote --listen tcp/10.0.0.2:7447 --connect tcp/10.0.0.1:7447
+//! ```
+//!
+//! On the controller's side it reads `afs/servo/state` and publishes `afs/link/servo`
+//! batches; on the remote side it unpacks them onto the remote host's own `afs/servo/state`,
+//! checking every batch and sample number, so that observers there read the stream as they
+//! would on host A and every loss is counted and placed. Nothing on host A waits on it: its
+//! ports discard on overflow, and the tunnel runs in this process, at normal priority.
+
+use afs::boards::{Common, stop_flag};
+use afs::ipc;
+use afs_shared::batch::{Packer, SeqGaps, Unpacker};
+use afs_shared::msg;
+use anyhow::{Context, Result, bail};
+use clap::Parser;
+use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::prelude::*;
+use iceoryx2::waitset::WaitSetRunResult;
+use iceoryx2_integrations_zenoh_link_carrier::ZenohCarrier;
+use iceoryx2_link::Link;
+use iceoryx2_link_backend::AllowList;
+use iceoryx2_link_tunnel::Tunnel;
+use serde::Serialize;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
+
+/// The services that cross by default: the servo's stream as batches, the low-rate status
+/// streams, and the estimator's services in their topic form (docs/link.md, *What crosses*).
+pub const CROSSING: [&str; 9] = [
+    msg::service::LINK_SERVO,
+    msg::service::SUPERVISOR,
+    msg::service::LOOP_STATS,
+    msg::service::SENSOR_STATS,
+    msg::service::FRICTION,
+    msg::service::TANGENT_REQUEST,
+    msg::service::TANGENT_RESPONSE,
+    msg::service::ROTATION_REQUEST,
+    msg::service::ROTATION_RESPONSE,
+];
+
+/// Which end of the link this board is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "kebab-case")]
+enum Side {
+    /// The controller's host: packs the servo's stream.
+    Controller,
+    /// Another host: unpacks it onto its own `afs/servo/state`.
+    Remote,
+}
+
+/// The link board.
+#[derive(Parser)]
+#[command(name = "afs-link", version)]
+struct Cli {
+    #[command(flatten)]
+    common: Common,
+    /// Which end of the link this is.
+    #[arg(long, value_enum)]
+    side: Side,
+    /// zenoh endpoint to listen on (e.g. tcp/10.0.0.1:7447); repeatable.
+    #[arg(long)]
+    listen: Vec<String>,
+    /// zenoh endpoint of the other host's link board to connect to; repeatable.
+    #[arg(long)]
+    connect: Vec<String>,
+    /// A zenoh config file (JSON5) used instead of the one --listen and --connect make.
+    #[arg(long)]
+    zenoh_config: Option<PathBuf>,
+    /// Services to carry instead of the default set (wildcards `*` and `?`); repeatable.
+    #[arg(long)]
+    allow: Vec<String>,
+    /// Longest wait between two rounds when nothing arrives from the other host (ms).
+    #[arg(long, default_value_t = 1)]
+    poll_ms: u64,
+    /// Write the board's summary (JSON) here when it stops.
+    #[arg(long)]
+    summary: Option<PathBuf>,
+}
+
+/// What the board did, written at the end.
+#[derive(Debug, Default, Serialize)]
+struct Summary {
+    side: Option<Side>,
+    /// Servo samples read on this host (controller side).
+    servo_read: u64,
+    /// Their numbers (a gap: the packer fell behind the servo).
+    servo_seen: SeqGaps,
+    /// Batches published on `afs/link/servo` (controller side).
+    batches_sent: u64,
+    /// What arrived from the other host (remote side).
+    unpacked: Unpacker,
+    /// Servo samples republished on this host (remote side).
+    servo_published: u64,
+    /// Rounds of discovery and propagation.
+    rounds: u64,
+    /// Failed discoveries and propagations (each leaves the link usable).
+    discovery_errors: u64,
+    propagation_errors: u64,
+    /// Time spent in discovery, propagation and waiting (s).
+    discovery_s: f64,
+    propagation_s: f64,
+    waiting_s: f64,
+    /// Whether any service was bridged at the end.
+    bridged: bool,
+}
+
+fn zenoh_config(cli: &Cli) -> Result<zenoh::Config> {
+    if let Some(p) = &cli.zenoh_config {
+        return zenoh::Config::from_file(p)
+            .map_err(|e| anyhow::anyhow!("reading zenoh config {}: {e}", p.display()));
+    }
+    if cli.listen.is_empty() && cli.connect.is_empty() {
+        bail!(
+            "give --listen and/or --connect endpoints (e.g. --listen tcp/127.0.0.1:7447), or --zenoh-config"
+        );
+    }
+    let list = |v: &[String]| {
+        v.iter()
+            .map(|e| serde_json::to_string(e).unwrap_or_default())
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    // Peers on the given endpoints only: no multicast or gossip scouting, so nothing is sent
+    // anywhere but to the addresses named.
+    let text = format!(
+        r#"{{ mode: "peer",
+             listen: {{ endpoints: [{}] }},
+             connect: {{ endpoints: [{}] }},
+             scouting: {{ multicast: {{ enabled: false }}, gossip: {{ enabled: false }} }} }}"#,
+        list(&cli.listen),
+        list(&cli.connect)
+    );
+    zenoh::Config::from_json5(&text).map_err(|e| anyhow::anyhow!("zenoh config {text}: {e}"))
+}
+
+fn run(cli: &Cli) -> Result<Summary> {
+    let prefix = &cli.common.prefix;
+    ipc::check_prefix(prefix)?;
+    if cli.poll_ms == 0 || cli.poll_ms > 1000 {
+        bail!("--poll-ms {} must be 1 to 1000", cli.poll_ms);
+    }
+    let r = afs::rt::setup(cli.common.priority, false, cli.common.cpu);
+    for w in &r.warnings {
+        eprintln!("afs-link: warning: {w}");
+    }
+    let stop = stop_flag()?;
+    let zenoh = zenoh_config(cli)?;
+    let allow: Vec<String> = if cli.allow.is_empty() {
+        CROSSING.iter().map(|s| s.to_string()).collect()
+    } else {
+        cli.allow.clone()
+    };
+    // The board's own ports on one node, the tunnel on another: the tunnel passes over what
+    // its own node published, and the batches must cross.
+    let node = ipc::node(prefix, "link")?;
+    let cfg = ipc::config(prefix)?;
+    let tunnel_node = NodeBuilder::new()
+        .name(&"link-tunnel".try_into().context("node name")?)
+        .config(&cfg)
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Svc>()
+        .context("creating the tunnel's node")?;
+    let carrier = ZenohCarrier::create(zenoh).map_err(|e| {
+        anyhow::anyhow!("starting zenoh (are the endpoints free and yours?): {e:?}")
+    })?;
+    let list = AllowList::new(&allow);
+    let mut link = Link::new(tunnel_node, Tunnel::new(carrier, &cfg))
+        .with_filter(move |n: &ServiceName| list.admits(n.as_str()));
+    let listener = link
+        .listener()
+        .map_err(|e| anyhow::anyhow!("creating the tunnel's wake-up listener: {e:?}"))?;
+    // Wakes when something arrives from the other host, and every `poll` for what this host
+    // published (a WaitSet: the listener's own timed wait rounds up to the kernel's tick).
+    let waitset = WaitSetBuilder::new()
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<iceoryx2_link_backend::WakeService>()
+        .map_err(|e| anyhow::anyhow!("creating the link's wait set: {e:?}"))?;
+    let _arrivals = waitset
+        .attach_notification(&listener)
+        .map_err(|e| anyhow::anyhow!("attaching the tunnel's listener: {e:?}"))?;
+    let _tick = waitset
+        .attach_interval(Duration::from_millis(cli.poll_ms))
+        .map_err(|e| anyhow::anyhow!("attaching the link's poll interval: {e:?}"))?;
+
+    let mut sum = Summary {
+        side: Some(cli.side),
+        ..Default::default()
+    };
+    let epoch = afs::rt::monotonic_ns();
+    let mut packer = Packer::new(epoch);
+    let (servo_sub, batch_pub, batch_sub, servo_pub) = match cli.side {
+        Side::Controller => (
+            Some(
+                ipc::servo(&node)?
+                    .subscriber_builder()
+                    .buffer_size(ipc::TICK_BUFFER)
+                    .create()
+                    .context("servo subscriber")?,
+            ),
+            Some(
+                ipc::link_servo(&node)?
+                    .publisher_builder()
+                    .backpressure_strategy(ipc::BACKPRESSURE)
+                    .create()
+                    .context("batch publisher")?,
+            ),
+            None,
+            None,
+        ),
+        Side::Remote => (
+            None,
+            None,
+            Some(
+                ipc::link_servo(&node)?
+                    .subscriber_builder()
+                    .create()
+                    .context("batch subscriber")?,
+            ),
+            Some(
+                ipc::servo(&node)?
+                    .publisher_builder()
+                    .backpressure_strategy(ipc::BACKPRESSURE)
+                    .create()
+                    .context("servo publisher")?,
+            ),
+        ),
+    };
+    let mut last_discovery = Instant::now() - Duration::from_secs(1);
+    let mut last_warning = Instant::now() - Duration::from_secs(10);
+    let mut warn = |what: &str, e: &dyn std::fmt::Debug| {
+        if last_warning.elapsed() > Duration::from_secs(5) {
+            eprintln!("afs-link: warning: {what} failed: {e:?} (the link carries on)");
+            last_warning = Instant::now();
+        }
+    };
+    while !stop.load(Ordering::Relaxed) {
+        let t = Instant::now();
+        match waitset.wait_and_process_once(|_| CallbackProgression::Continue) {
+            Ok(WaitSetRunResult::TerminationRequest) => break,
+            // Interrupted by a signal: the loop's condition decides.
+            Ok(WaitSetRunResult::Interrupt) | Err(_) => continue,
+            Ok(_) => {}
+        }
+        let _ = listener.try_wait(|_| {});
+        sum.waiting_s += t.elapsed().as_secs_f64();
+        if let (Some(sub), Some(publ)) = (&servo_sub, &batch_pub) {
+            let mut got = false;
+            while let Ok(Some(s)) = sub.receive() {
+                got = true;
+                sum.servo_read += 1;
+                packer.push(s.payload(), |b| {
+                    let mut b = *b;
+                    b.publish_ns = afs::rt::monotonic_ns();
+                    if publ.send_copy(b).is_ok() {
+                        sum.batches_sent += 1;
+                    }
+                });
+            }
+            if !got {
+                // The stream paused (or ended): send what is packed.
+                packer.flush(|b| {
+                    let mut b = *b;
+                    b.publish_ns = afs::rt::monotonic_ns();
+                    if publ.send_copy(b).is_ok() {
+                        sum.batches_sent += 1;
+                    }
+                });
+            }
+        }
+        if last_discovery.elapsed() >= Duration::from_millis(100) {
+            last_discovery = Instant::now();
+            if let Err(e) = link.discover() {
+                sum.discovery_errors += 1;
+                warn("discovery", &e);
+            }
+            sum.discovery_s += last_discovery.elapsed().as_secs_f64();
+            for p in [&batch_pub].into_iter().flatten() {
+                let _ = p.update_connections();
+            }
+            for p in [&servo_pub].into_iter().flatten() {
+                let _ = p.update_connections();
+            }
+        }
+        let t = Instant::now();
+        if let Err(e) = link.propagate() {
+            sum.propagation_errors += 1;
+            warn("propagation", &e);
+        }
+        sum.propagation_s += t.elapsed().as_secs_f64();
+        sum.rounds += 1;
+        if let (Some(sub), Some(publ)) = (&batch_sub, &servo_pub) {
+            while let Ok(Some(b)) = sub.receive() {
+                sum.unpacked.push(b.payload(), |s| {
+                    if publ.send_copy(*s).is_ok() {
+                        sum.servo_published += 1;
+                    }
+                });
+            }
+        }
+    }
+    sum.servo_seen = packer.seen().clone();
+    sum.bridged = !link.bridges().empty();
+    Ok(sum)
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = run(&cli);
+    // The last node of the prefix on this host leaves it clean (on a remote host there is no
+    // supervisor to do it): iceoryx2 keeps the node counter, removed by name.
+    if ipc::census(&cli.common.prefix, false).is_ok_and(|c| c.alive.is_empty()) {
+        let _ = ipc::release_prefix(&cli.common.prefix);
+    }
+    match result {
+        Ok(sum) => {
+            let text = serde_json::to_string(&sum).unwrap_or_default();
+            eprintln!("afs-link: {text}");
+            if let Some(p) = &cli.summary
+                && let Err(e) = std::fs::write(p, &text)
+            {
+                eprintln!("afs-link: error: writing {}: {e}", p.display());
+                return ExitCode::from(2);
+            }
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("afs-link: error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}
