@@ -102,6 +102,12 @@ struct Summary {
     unpacked: Unpacker,
     /// Servo samples republished on this host (remote side).
     servo_published: u64,
+    /// From the servo's publication on host A to the republication here (µs; remote side):
+    /// the batching wait, the tunnel both ways of zenoh, and this board's wake-up. Only
+    /// meaningful when both hosts share a clock (two hosts on one machine).
+    sample_latency_us: Option<afs::hist::QuantilesUs>,
+    /// From a batch's publication on host A to its arrival here (µs; remote side).
+    batch_latency_us: Option<afs::hist::QuantilesUs>,
     /// Rounds of discovery and propagation.
     rounds: u64,
     /// Failed discoveries and propagations (each leaves the link usable).
@@ -199,6 +205,8 @@ fn run(cli: &Cli) -> Result<Summary> {
     };
     let epoch = afs::rt::monotonic_ns();
     let mut packer = Packer::new(epoch);
+    let mut sample_latency = afs::hist::new()?;
+    let mut batch_latency = afs::hist::new()?;
     let (servo_sub, batch_pub, batch_sub, servo_pub) = match cli.side {
         Side::Controller => (
             Some(
@@ -301,15 +309,25 @@ fn run(cli: &Cli) -> Result<Summary> {
         sum.rounds += 1;
         if let (Some(sub), Some(publ)) = (&batch_sub, &servo_pub) {
             while let Ok(Some(b)) = sub.receive() {
+                let now = afs::rt::monotonic_ns();
+                afs::hist::record(
+                    &mut batch_latency,
+                    now.saturating_sub(b.payload().publish_ns),
+                );
                 sum.unpacked.push(b.payload(), |s| {
                     if publ.send_copy(*s).is_ok() {
                         sum.servo_published += 1;
+                        afs::hist::record(&mut sample_latency, now.saturating_sub(s.publish_ns));
                     }
                 });
             }
         }
     }
     sum.servo_seen = packer.seen().clone();
+    if !sample_latency.is_empty() {
+        sum.sample_latency_us = Some(afs::hist::QuantilesUs::of(&sample_latency));
+        sum.batch_latency_us = Some(afs::hist::QuantilesUs::of(&batch_latency));
+    }
     sum.bridged = !link.bridges().empty();
     Ok(sum)
 }

@@ -1,0 +1,139 @@
+//! Two hosts on one machine through the link board (docs/link.md): `examples/two-hosts.sh`
+//! makes host B (a network namespace on a veth pair, with its own /dev/shm and iceoryx2 root)
+//! and runs the estimator and a recorder there while host A runs the servo and the sensor. The
+//! tests read the script's JSON summary; they need root (namespaces), as CI has.
+//!
+//! One stack at a time (a lock), each with its own prefix; no test asserts a run time.
+
+use serde_json::Value;
+use std::path::PathBuf;
+use std::process::Command;
+
+mod common;
+use common::*;
+
+/// The directory of the built binaries (afs-link is built by `cargo test --workspace`).
+fn bin_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_BIN_EXE_afs"))
+        .parent()
+        .expect("the binaries' directory")
+        .to_path_buf()
+}
+
+/// Runs the script with `args`; returns its exit status and summary.
+fn two_hosts(prefix: &str, args: &[&str]) -> (i32, Value) {
+    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("examples/two-hosts.sh");
+    let out = Command::new(script)
+        .args(["--prefix", prefix, "--bin"])
+        .arg(bin_dir())
+        .args(args)
+        .output()
+        .expect("running examples/two-hosts.sh");
+    let text = String::from_utf8_lossy(&out.stdout);
+    let v: Value = serde_json::from_str(&text).unwrap_or_else(|e| {
+        panic!(
+            "the script's summary is not JSON ({e}): {text}\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        )
+    });
+    (out.status.code().unwrap_or(-1), v)
+}
+
+/// Surface tracking with the estimator on host B: the run passes and agrees with the lockstep
+/// reference, the tangent estimates came from host B through the request and response topics,
+/// and host B's recording holds the servo stream to its last tick with no number missing,
+/// every batch accounted for; host B's shared memory is left empty.
+#[test]
+fn the_estimator_on_another_host_serves_the_servo_and_the_record_has_no_gap() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let p = prefix("lk");
+    let (code, v) = two_hosts(&p, &["--duration", "30"]);
+    assert_eq!(code, 0, "{v:#}");
+    assert_eq!(v["passed"], true, "{v:#}");
+    assert_eq!(v["run"]["passed"], true);
+    assert!(v["run"]["estimates"].as_u64().unwrap() >= 1, "{v:#}");
+    assert_eq!(v["run"]["agreement"]["agrees"], true);
+    let est = &v["run"]["estimator_link"];
+    assert!(est["answers"].as_u64().unwrap() >= 1, "{est}");
+    assert_eq!(v["host_b"]["servo_missing"], 0);
+    assert_eq!(v["host_b"]["ended"], "stopping");
+    let unpacked = &v["host_b"]["link"]["unpacked"];
+    assert_eq!(unpacked["batches"]["missing"], 0, "{unpacked}");
+    assert_eq!(unpacked["samples"]["missing"], 0, "{unpacked}");
+    assert_eq!(unpacked["refused"], 0);
+    // What host B's link board published is what its recorder got.
+    assert_eq!(
+        v["host_b"]["link"]["servo_published"], v["host_b"]["servo_samples"],
+        "{v:#}"
+    );
+    assert_eq!(
+        v["host_b"]["recording"]["messages"]["/servo"],
+        v["host_b"]["servo_samples"]
+    );
+    assert!(v["host_b"]["recording"]["messages"]["/supervisor"].as_u64() > Some(0));
+    assert!(v["host_b"]["recording"]["messages"]["/loop_stats"].as_u64() > Some(0));
+    assert_eq!(v["host_b"]["leftover_files"], Value::Array(vec![]));
+    assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
+}
+
+/// The link cut for 12 s (host A's end of the veth pair down): host A's stack stays safe and
+/// keeps its own data (every check but the lockstep agreement holds: a request the cut
+/// outlasted is given up, as with a dead estimator); host B's recording resumes when the link
+/// is back, to the run's last tick, and its gaps are reported and lie where the link was cut.
+#[test]
+fn a_cut_link_shows_as_a_reported_gap_and_host_a_stays_safe() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let p = prefix("lc");
+    let (code, v) = two_hosts(
+        &p,
+        &["--duration", "30", "--cut-at", "8", "--cut-for", "12"],
+    );
+    assert_eq!(code, 0, "{v:#}");
+    assert_eq!(v["passed"], true, "{v:#}");
+    let failed = v["run"]["failed_checks"].as_array().unwrap();
+    assert!(
+        failed
+            .iter()
+            .all(|c| c == "figures within tolerance of the lockstep reference"),
+        "{failed:?}"
+    );
+    assert_eq!(v["cut"]["gaps_inside"], true, "{v:#}");
+    let missing = v["host_b"]["servo_missing"].as_u64().unwrap();
+    let gaps = v["host_b"]["servo_gaps"].as_array().unwrap();
+    let listed: u64 = gaps.iter().map(|g| g["missing"].as_u64().unwrap()).sum();
+    assert_eq!(listed, missing, "every missing sample is in a reported gap");
+    // The link board's own account agrees with the recorder's.
+    assert_eq!(
+        v["host_b"]["link"]["unpacked"]["samples"]["missing"].as_u64(),
+        Some(missing)
+    );
+    assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
+}
+
+/// Bad input is refused with a message that says what to do, before anything starts.
+#[test]
+fn the_link_board_and_afs_record_refuse_bad_input() {
+    let link = bin_dir().join("afs-link");
+    let out = Command::new(&link)
+        .args(["--prefix", "lkbad", "--side", "remote"])
+        .output()
+        .unwrap();
+    assert_refused(&out, &"no endpoint", "--listen");
+    let out = Command::new(&link)
+        .args(["--prefix", "bad prefix", "--side", "remote", "--listen"])
+        .arg("tcp/127.0.0.1:7999")
+        .output()
+        .unwrap();
+    assert_refused(&out, &"bad prefix", "prefix");
+    let out = Command::new(&link)
+        .args(["--prefix", "lkbad", "--side", "remote", "--poll-ms", "0"])
+        .args(["--listen", "tcp/127.0.0.1:7999"])
+        .output()
+        .unwrap();
+    assert_refused(&out, &"poll 0", "--poll-ms");
+    let out = afs()
+        .args(["record", "--prefix", "lknone", "--out", "/tmp/lknone.mcap"])
+        .output()
+        .unwrap();
+    assert_refused(&out, &"no stack", "no stack with prefix 'lknone'");
+}
