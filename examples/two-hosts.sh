@@ -41,7 +41,7 @@ while [ $# -gt 0 ]; do
 done
 [ "$(id -u)" -eq 0 ] || die "run as root: host B is a network and mount namespace"
 for b in afs afs-servo afs-sensor afs-estimator afs-link; do
-    [ -x "$bin/$b" ] || die "$bin/$b is missing: build with \`cargo build --release --workspace\`"
+    [ -x "$bin/$b" ] || die "$bin/$b is missing: build with \`cargo build --release --features link\`"
 done
 for t in ip unshare nsenter python3; do
     command -v "$t" >/dev/null || die "'$t' is needed"

@@ -1,7 +1,8 @@
 //! Two hosts on one machine through the link board (docs/link.md): `examples/two-hosts.sh`
 //! makes host B (a network namespace on a veth pair, with its own /dev/shm and iceoryx2 root)
 //! and runs the estimator and a recorder there while host A runs the servo and the sensor. The
-//! tests read the script's JSON summary; they need root (namespaces), as CI has.
+//! tests read the script's JSON summary; they need root (namespaces), as CI has, and the
+//! `link` feature (the README's test command builds with `--all-features`).
 //!
 //! One stack at a time (a lock), each with its own prefix; no test asserts a run time.
 
@@ -12,10 +13,10 @@ use std::process::Command;
 mod common;
 use common::*;
 
-/// The directory of the built binaries (afs-link is built by `cargo test --workspace`).
+/// The directory of the built binaries (afs-link with them: this test needs `--features link`).
 fn bin_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_BIN_EXE_afs"))
-        .parent()
+    let link = PathBuf::from(env!("CARGO_BIN_EXE_afs-link"));
+    link.parent()
         .expect("the binaries' directory")
         .to_path_buf()
 }
@@ -136,4 +137,60 @@ fn the_link_board_and_afs_record_refuse_bad_input() {
         .output()
         .unwrap();
     assert_refused(&out, &"no stack", "no stack with prefix 'lknone'");
+}
+
+/// `afs bench link` (short): every series measured, the link's servo stream complete on host
+/// B, pings answered across the link once it is up, every run passed. Figures are not judged
+/// here (they are the benchmark's targets).
+#[test]
+fn bench_link_measures_both_paths() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let p = prefix("lb");
+    let dir = std::env::temp_dir().join(format!("afs-bench-link-{p}"));
+    let out = afs()
+        .args([
+            "bench",
+            "link",
+            "--duration",
+            "6",
+            "--json",
+            "--prefix",
+            &p,
+            "--out",
+        ])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let l = &v["link"];
+    for s in [
+        "sample_host_a",
+        "sample_link",
+        "rtt_host_b",
+        "rtt_link",
+        "wake_without",
+        "wake_with_link",
+    ] {
+        assert!(
+            l["series"][s]["summary_us"]["count"].as_u64() > Some(0),
+            "{s}: {l:#}"
+        );
+    }
+    assert_eq!(l["loss"]["servo_host_b"]["missing"], 0, "{l:#}");
+    assert!(l["loss"]["pings_link"][1].as_u64() > Some(0), "{l:#}");
+    for r in l["runs_with_link"].as_array().unwrap() {
+        assert_eq!(r[0], true, "{l:#}");
+    }
+    for r in l["runs_without_link"].as_array().unwrap() {
+        assert_eq!(r, &Value::Bool(true), "{l:#}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    for q in [format!("{p}a"), format!("{p}b")] {
+        assert!(leftovers(&q).is_empty(), "{:?}", leftovers(&q));
+    }
 }

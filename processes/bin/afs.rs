@@ -285,10 +285,13 @@ enum Command {
     /// ping-pong (the floor) and a Unix socket, in interleaved rounds. loop: the servo's wake
     /// latency against a bare absolute-time loop at the same priority on the same core, at the
     /// same time. stack: force age at use and servo wake latency, without and with a CPU hog, and with a
-    /// Foxglove client on the live view (their wake p99 ratio).
+    /// Foxglove client on the live view (their wake p99 ratio). link: a servo sample's age on
+    /// arrival on one host and across the link board to a second prefix, an estimator request's
+    /// round trip across it, the servo's wake latency with the link and without (docs/link.md;
+    /// needs afs-link, not part of all).
     /// Writes .hgrm histograms and SVG percentile plots into --out.
     Bench {
-        /// hop, loop, stack or all.
+        /// hop, loop, stack, link or all (hop, loop and stack).
         #[arg(value_enum, default_value = "all")]
         part: afs::tools::bench::Part,
         /// Seconds of measurement per part (stack: this much without and with the hog).

@@ -3,13 +3,13 @@
 //! (which numbers are missing), never silently lost (docs/link.md).
 
 use crate::msg::{SERVO_BATCH, ServoBatch, ServoSample};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Gaps recorded one by one; beyond this only counted.
 pub const MAX_GAPS: usize = 64;
 
 /// A run of missing sequence numbers: `first..first + missing`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Gap {
     /// The first number missing.
     pub first: u64,
@@ -19,7 +19,7 @@ pub struct Gap {
 
 /// What a sequence-numbered stream delivered: counts of received, missing and repeated or
 /// backward numbers, and the first [`MAX_GAPS`] gaps.
-#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct SeqGaps {
     /// Numbers received.
     pub received: u64,

@@ -16,11 +16,17 @@
 //!   and with a CPU hog on the other core, and with a Foxglove client reading every topic of
 //!   the live view (`afs run --foxglove`), in six alternating stack runs of half the duration.
 //!
+//! * **link**: the link board (docs/link.md): a servo sample's age on arrival on the same host
+//!   and across the link, an estimator request's round trip across it and on one host, the
+//!   servo's wake latency with the link and without; host B is a second prefix (not part of
+//!   `all`: it needs `afs-link`, built with `--workspace`).
+//!
 //! Each part writes one `.hgrm` per series (HdrHistogram's percentile distribution) and a
 //! percentile plot into `--out`, and reports p50 … max per series with its ratio to its floor,
 //! every ratio from series measured in the same invocation.
 
 mod hop;
+mod link;
 mod stack;
 mod transport;
 
@@ -47,7 +53,9 @@ pub enum Part {
     Loop,
     /// The full graph, without and with a CPU hog.
     Stack,
-    /// All three.
+    /// The link board: latency and loss across it (not part of `all`).
+    Link,
+    /// Hop, loop and stack.
     All,
 }
 
@@ -57,12 +65,13 @@ impl Part {
             Part::Hop => "hop",
             Part::Loop => "loop",
             Part::Stack => "stack",
+            Part::Link => "link",
             Part::All => "all",
         }
     }
 
     fn includes(self, p: Part) -> bool {
-        self == Part::All || self == p
+        self == p || (self == Part::All && p != Part::Link)
     }
 }
 
@@ -132,6 +141,9 @@ pub struct BenchReport {
     /// The full graph without and with a CPU hog.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stack: Option<stack::StackPart>,
+    /// The link board.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link: Option<link::LinkPart>,
     /// Wall time (s).
     pub wall_s: f64,
     /// Stopped by Ctrl-C.
@@ -150,6 +162,9 @@ impl BenchReport {
         }
         if let Some(s) = &self.stack {
             v.push(("stack", &s.part));
+        }
+        if let Some(l) = &self.link {
+            v.push(("link", &l.part));
         }
         v
     }
@@ -213,6 +228,10 @@ pub fn run(opts: &BenchOptions, stop: &AtomicBool) -> Result<BenchReport> {
         true => Some(stack::stack(opts, stop)?),
         false => None,
     };
+    let link = match opts.part.includes(Part::Link) && !stopped() {
+        true => Some(link::link(opts, stop)?),
+        false => None,
+    };
     Ok(BenchReport {
         bench: opts.part.name().into(),
         duration_s: opts.duration_s,
@@ -223,6 +242,7 @@ pub fn run(opts: &BenchOptions, stop: &AtomicBool) -> Result<BenchReport> {
         hop,
         loop_part,
         stack,
+        link,
         wall_s: t0.elapsed().as_secs_f64(),
         interrupted: stopped(),
     })

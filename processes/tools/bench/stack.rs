@@ -87,10 +87,10 @@ pub struct StackPart {
 }
 
 /// A stack run for the benchmark: `afs run` with the servo saving its histograms.
-struct StackRun {
-    report: RunReport,
-    wake: Histogram<u64>,
-    age: Histogram<u64>,
+pub(super) struct StackRun {
+    pub(super) report: RunReport,
+    pub(super) wake: Histogram<u64>,
+    pub(super) age: Histogram<u64>,
 }
 
 /// Runs a stack (`afs run` refuses a prefix in use) while `during` runs beside it; `during`
@@ -103,7 +103,20 @@ fn run_stack<T: Send>(
     stop: &AtomicBool,
     during: impl FnOnce(&AtomicBool) -> T + Send,
 ) -> Result<(StackRun, T)> {
-    let mut stack = StackFile::parse(DEFAULT_STACK, "(built-in)")?;
+    run_stack_from(DEFAULT_STACK, prefix, duration_s, dir, extra, stop, during)
+}
+
+/// [`run_stack`] with the graph of the stack file `text`.
+pub(super) fn run_stack_from<T: Send>(
+    text: &str,
+    prefix: &str,
+    duration_s: f64,
+    dir: &Path,
+    extra: &[String],
+    stop: &AtomicBool,
+    during: impl FnOnce(&AtomicBool) -> T + Send,
+) -> Result<(StackRun, T)> {
+    let mut stack = StackFile::parse(text, "(benchmark)")?;
     stack.prefix = prefix.into();
     stack.scenario = "surface-tracking".into();
     stack.duration_s = duration_s;
