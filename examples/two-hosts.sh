@@ -7,9 +7,10 @@
 # scenario runs; one JSON summary is printed on stdout.
 #
 #   sudo examples/two-hosts.sh [--scenario surface-tracking] [--duration 30] [--seed 1]
-#        [--prefix P] [--bin target/release] [--cut-at S --cut-for S] [--keep]
+#        [--prefix P] [--bin target/release] [--cut-at S --cut-for S] [--kill-link-at S] [--keep]
 #
-# --cut-at/--cut-for take host A's end of the veth pair down for a while (a cut link).
+# --cut-at/--cut-for take host A's end of the veth pair down for a while (a cut link);
+# --kill-link-at SIGKILLs host A's link board (its supervisor restarts it).
 # Everything the script makes (namespace, veth pair, processes, files) is removed at the end
 # unless --keep. Nothing leaves the machine: zenoh listens and connects on the veth pair's
 # addresses only, with multicast and gossip scouting off. Exit status: 0 when the run passed
@@ -23,6 +24,7 @@ prefix="twohosts$$"
 bin="$(cd "$(dirname "$0")/.." && pwd)/target/release"
 cut_at=""
 cut_for=""
+kill_at=""
 keep=0
 die() { echo "two-hosts: error: $*" >&2; exit 2; }
 while [ $# -gt 0 ]; do
@@ -34,8 +36,9 @@ while [ $# -gt 0 ]; do
         --bin) bin="$2"; shift 2 ;;
         --cut-at) cut_at="$2"; shift 2 ;;
         --cut-for) cut_for="$2"; shift 2 ;;
+        --kill-link-at) kill_at="$2"; shift 2 ;;
         --keep) keep=1; shift ;;
-        -h|--help) sed -n '2,18p' "$0"; exit 0 ;;
+        -h|--help) sed -n '2,19p' "$0"; exit 0 ;;
         *) die "unknown option '$1' (see --help)" ;;
     esac
 done
@@ -114,6 +117,10 @@ if [ -n "$cut_at" ]; then
     ( sleep "$cut_at"; ip link set "$veth_a" down; sleep "$cut_for"; ip link set "$veth_a" up ) &
     pids+=($!)
 fi
+if [ -n "$kill_at" ]; then
+    ( sleep "$kill_at"; pkill -KILL -f "afs-link --prefix $prefix .*--side controller" ) &
+    pids+=($!)
+fi
 set +e
 "$bin/afs" run --config "$work/host-a.toml" --prefix "$prefix" --scenario "$scenario" \
     --duration "$duration" --seed "$seed" --json >"$work/a-run.json" 2>"$work/a-run.log"
@@ -135,9 +142,9 @@ pids=()
 # What the stack's processes left on host B (nothing, when they stop cleanly).
 leftover=$(on_b sh -c 'find /dev/shm /tmp/iceoryx2 -name "afs_*" 2>/dev/null | tr "\n" " "' || true)
 
-python3 - "$work" "$run_status" "$leftover" "${cut_at:-}" "${cut_for:-}" <<'EOF'
+python3 - "$work" "$run_status" "$leftover" "${cut_at:-}" "${cut_for:-}" "${kill_at:-}" <<'EOF'
 import json, sys, os
-work, run_status, leftover, cut_at, cut_for = sys.argv[1:6]
+work, run_status, leftover, cut_at, cut_for, kill_at = sys.argv[1:7]
 def load(name):
     try:
         with open(os.path.join(work, name)) as f:
@@ -148,6 +155,7 @@ a, rec, link = load("a-run.json"), load("b-record.json"), load("b-link.json")
 procs = {p.get("name"): p for p in a.get("processes", [])} if "processes" in a else {}
 servo = rec.get("servo", {})
 cut = bool(cut_at)
+killed = bool(kill_at)
 out = {
     "passed": False,
     "run": {
@@ -169,12 +177,18 @@ out = {
         "leftover_files": leftover.split(),
     },
     "cut": {"at_s": float(cut_at), "for_s": float(cut_for)} if cut else None,
+    "killed_link_at_s": float(kill_at) if killed else None,
 }
 estimates = out["run"]["estimates"] or 0
 failed = out["run"]["failed_checks"]
 period_s = (a.get("loop") or {}).get("period_us", 100.0) * 1e-6
 out["run"]["estimator_link"] = (a.get("loop") or {}).get("estimator")
-if cut:
+if killed:
+    # The supervisor restarts the link board; host B sees a new packer (epoch) and a gap of
+    # the restart's length, reported; the servo's request in flight, if any, is re-sent.
+    ok_run = int(run_status) == 0 and bool(a.get("passed")) and procs.get("link", {}).get("restarts") == 1
+    ok_gaps = (link.get("unpacked") or {}).get("epochs") == 2 and servo.get("gaps", 0) == len(servo.get("first_gaps", []))
+elif cut:
     # Host A must stay safe and keep its own data; only the agreement with the lockstep may
     # go (a request the cut outlasted is given up, as with a dead estimator). Every gap of
     # host B's recording must lie where the link was cut (servo ticks, with the stack's

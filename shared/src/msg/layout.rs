@@ -192,6 +192,10 @@ pub fn layouts() -> Vec<MessageLayout> {
             node_ns: "u64", ports_ns: "u64", prepared_ns: "u64", input_ns: "u64",
             rt_ns: "u64", data_ns: "u64",
         ]),
+        layout!(ServoBatch, "ServoBatch", [
+            version: "u32", count: "u32", seq: "u64", epoch: "u64", missed: "u64",
+            publish_ns: "u64", samples: "ServoSample[50]",
+        ]),
         layout!(WorldSnapshot, "WorldSnapshot", [
             version: "u32", driver_leg: "u32", seq: "u64", time_s: "f64", q_rad: "f64[2]",
             qd_rad_per_s: "f64[2]", friction_face: "u64[2]",
