@@ -323,6 +323,20 @@ fn run(cli: &Cli) -> Result<Summary> {
             }
         }
     }
+    // Stopping: send what is packed and give the tunnel a moment to carry it.
+    if let Some(publ) = &batch_pub {
+        packer.flush(|b| {
+            let mut b = *b;
+            b.publish_ns = afs::rt::monotonic_ns();
+            if publ.send_copy(b).is_ok() {
+                sum.batches_sent += 1;
+            }
+        });
+        for _ in 0..50 {
+            let _ = link.propagate();
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
     sum.servo_seen = packer.seen().clone();
     if !sample_latency.is_empty() {
         sum.sample_latency_us = Some(afs::hist::QuantilesUs::of(&sample_latency));

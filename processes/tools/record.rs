@@ -523,7 +523,21 @@ pub fn record_stack(
             rec.push(r);
         });
         match end {
-            Ok(Some(Ended::Stopping)) => break "stopping",
+            Ok(Some(Ended::Stopping)) => {
+                // What was published before the supervisor said it stops may still be on its
+                // way (across a link, the last batch): keep reading for a moment.
+                let t = Instant::now();
+                while t.elapsed() < Duration::from_secs(1) {
+                    std::thread::sleep(Duration::from_millis(5));
+                    let _ = follower.poll(|r| {
+                        if let Rec::Servo(s) = &r {
+                            servo.push(s.seq);
+                        }
+                        rec.push(r);
+                    });
+                }
+                break "stopping";
+            }
             Ok(Some(Ended::Gone)) => break "gone",
             Ok(None) => {}
             Err(e) => {
