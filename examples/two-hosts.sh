@@ -7,10 +7,13 @@
 # scenario runs; one JSON summary is printed on stdout.
 #
 #   sudo examples/two-hosts.sh [--scenario surface-tracking] [--duration 30] [--seed 1]
-#        [--prefix P] [--bin target/release] [--cut-at S --cut-for S] [--kill-link-at S] [--keep]
+#        [--prefix P] [--bin target/release] [--chaos KINDS [--faults N] [--cut-for S]] [--keep]
 #
-# --cut-at/--cut-for take host A's end of the veth pair down for a while (a cut link);
-# --kill-link-at SIGKILLs host A's link board (its supervisor restarts it).
+# --chaos runs `afs chaos` on host A instead of `afs run`, with the fault kinds given
+# (comma-separated, taken in turn, N faults: one of each by default), e.g. kill-link,cut-link:
+# kill-link SIGKILLs host A's link board (its supervisor restarts it), cut-link takes host A's
+# end of the veth pair down for --cut-for seconds (5 by default; the stack file's [chaos] table
+# gets the commands).
 # Everything the script makes (namespace, veth pair, processes, files) is removed at the end
 # unless --keep. Nothing leaves the machine: zenoh listens and connects on the veth pair's
 # addresses only, with multicast and gossip scouting off. Exit status: 0 when the run passed
@@ -22,9 +25,9 @@ duration=30
 seed=1
 prefix="twohosts$$"
 bin="$(cd "$(dirname "$0")/.." && pwd)/target/release"
-cut_at=""
-cut_for=""
-kill_at=""
+chaos=""
+faults=""
+cut_for=5
 keep=0
 die() { echo "two-hosts: error: $*" >&2; exit 2; }
 while [ $# -gt 0 ]; do
@@ -34,11 +37,11 @@ while [ $# -gt 0 ]; do
         --seed) seed="$2"; shift 2 ;;
         --prefix) prefix="$2"; shift 2 ;;
         --bin) bin="$2"; shift 2 ;;
-        --cut-at) cut_at="$2"; shift 2 ;;
+        --chaos) chaos="$2"; shift 2 ;;
+        --faults) faults="$2"; shift 2 ;;
         --cut-for) cut_for="$2"; shift 2 ;;
-        --kill-link-at) kill_at="$2"; shift 2 ;;
         --keep) keep=1; shift ;;
-        -h|--help) sed -n '2,19p' "$0"; exit 0 ;;
+        -h|--help) sed -n '2,21p' "$0"; exit 0 ;;
         *) die "unknown option '$1' (see --help)" ;;
     esac
 done
@@ -49,7 +52,7 @@ done
 for t in ip unshare nsenter python3; do
     command -v "$t" >/dev/null || die "'$t' is needed"
 done
-if [ -n "$cut_at" ] && [ -z "$cut_for" ]; then die "--cut-at needs --cut-for"; fi
+if [ -z "$faults" ] && [ -n "$chaos" ]; then faults=$(echo "$chaos" | tr ',' '\n' | grep -c .); fi
 
 work="$(mktemp -d /tmp/afs-two-hosts.XXXXXX)"
 tag="$(printf '%05d' $(($$ % 100000)))"
@@ -113,16 +116,20 @@ pids+=("$record_pid")
 
 # Host A: the stack file with the link board on host A's address.
 sed "s#tcp/127.0.0.1:7447#tcp/$a_ip:$port#" "$(dirname "$0")/stack-two-hosts.toml" >"$work/host-a.toml"
-if [ -n "$cut_at" ]; then
-    ( sleep "$cut_at"; ip link set "$veth_a" down; sleep "$cut_for"; ip link set "$veth_a" up ) &
-    pids+=($!)
-fi
-if [ -n "$kill_at" ]; then
-    ( sleep "$kill_at"; pkill -KILL -f "afs-link --prefix $prefix .*--side controller" ) &
-    pids+=($!)
+run=(run)
+if [ -n "$chaos" ]; then
+    # How afs chaos cuts this link: host A's end of the veth pair down, and up again.
+    cat >>"$work/host-a.toml" <<TOML
+
+[chaos]
+cut_link = ["ip", "link", "set", "$veth_a", "down"]
+restore_link = ["ip", "link", "set", "$veth_a", "up"]
+cut_for_s = $cut_for
+TOML
+    run=(chaos --faults "$chaos" --kills "$faults" --in-turn)
 fi
 set +e
-"$bin/afs" run --config "$work/host-a.toml" --prefix "$prefix" --scenario "$scenario" \
+"$bin/afs" "${run[@]}" --config "$work/host-a.toml" --prefix "$prefix" --scenario "$scenario" \
     --duration "$duration" --seed "$seed" --json >"$work/a-run.json" 2>"$work/a-run.log"
 run_status=$?
 set -e
@@ -142,9 +149,9 @@ pids=()
 # What the stack's processes left on host B (nothing, when they stop cleanly).
 leftover=$(on_b sh -c 'find /dev/shm /tmp/iceoryx2 -name "afs_*" 2>/dev/null | tr "\n" " "' || true)
 
-python3 - "$work" "$run_status" "$leftover" "${cut_at:-}" "${cut_for:-}" "${kill_at:-}" <<'EOF'
+python3 - "$work" "$run_status" "$leftover" "$chaos" "$cut_for" <<'EOF'
 import json, sys, os
-work, run_status, leftover, cut_at, cut_for, kill_at = sys.argv[1:7]
+work, run_status, leftover, chaos, cut_for = sys.argv[1:6]
 def load(name):
     try:
         with open(os.path.join(work, name)) as f:
@@ -154,8 +161,7 @@ def load(name):
 a, rec, link = load("a-run.json"), load("b-record.json"), load("b-link.json")
 procs = {p.get("name"): p for p in a.get("processes", [])} if "processes" in a else {}
 servo = rec.get("servo", {})
-cut = bool(cut_at)
-killed = bool(kill_at)
+faults = (a.get("chaos") or {}).get("faults", [])
 out = {
     "passed": False,
     "run": {
@@ -176,29 +182,39 @@ out = {
         "link": link,
         "leftover_files": leftover.split(),
     },
-    "cut": {"at_s": float(cut_at), "for_s": float(cut_for)} if cut else None,
-    "killed_link_at_s": float(kill_at) if killed else None,
+    "chaos": {
+        "faults": [{k: f.get(k) for k in ("kind", "injected_at_s", "back_ms", "note")} for f in faults],
+    } if chaos else None,
 }
 estimates = out["run"]["estimates"] or 0
 failed = out["run"]["failed_checks"]
 period_s = (a.get("loop") or {}).get("period_us", 100.0) * 1e-6
 out["run"]["estimator_link"] = (a.get("loop") or {}).get("estimator")
-if killed:
-    # The supervisor restarts the link board; host B sees a new packer (epoch) and a gap of
-    # the restart's length, reported; the servo's request in flight, if any, is re-sent.
-    ok_run = int(run_status) == 0 and bool(a.get("passed")) and procs.get("link", {}).get("restarts") == 1
-    ok_gaps = (link.get("unpacked") or {}).get("epochs") == 2 and servo.get("gaps", 0) == len(servo.get("first_gaps", []))
-elif cut:
+if chaos:
     # Host A must stay safe and keep its own data; only the agreement with the lockstep may
-    # go (a request the cut outlasted is given up, as with a dead estimator). Every gap of
-    # host B's recording must lie where the link was cut (servo ticks, with the stack's
-    # start-up and zenoh's reconnection as margin).
-    lo, hi = (float(cut_at) - 2.0) / period_s, (float(cut_at) + float(cut_for) + 8.0) / period_s
+    # go (a request that a cut outlasted is given up, as with a dead estimator). A killed link
+    # board is restarted by the supervisor, and host B sees a new packer (epoch). Every gap of
+    # host B's recording must be reported and lie where a fault was (servo ticks, from 2 s
+    # before the injection to 8 s after the link is back: zenoh's reconnection, with margin;
+    # a cut within zenoh's 10-s lease is left to TCP, whose backoff can hold the data as long
+    # again after the cut's end).
+    kills = sum(1 for f in faults if f.get("kind") == "kill-link")
+    windows = []
+    for f in faults:
+        t = f.get("injected_at_s") or 0.0
+        cut = float(cut_for) if f.get("kind") == "cut-link" else 0.0
+        back = cut + (cut if cut <= 10.0 else 0.0)
+        windows.append(((t - 2.0) / period_s, (t + back + 8.0) / period_s))
     gaps = servo.get("first_gaps", [])
-    out["cut"]["gaps_inside"] = all(lo <= g["first"] and g["first"] + g["missing"] <= hi for g in gaps)
-    out["cut"]["gaps"] = len(gaps)
-    ok_run = set(failed) <= {"figures within tolerance of the lockstep reference"}
-    ok_gaps = out["cut"]["gaps_inside"] and servo.get("gaps", 0) == len(gaps)
+    inside = lambda g: any(lo <= g["first"] and g["first"] + g["missing"] <= hi for lo, hi in windows)
+    out["chaos"]["gaps"] = len(gaps)
+    out["chaos"]["gaps_inside"] = all(inside(g) for g in gaps)
+    out["chaos"]["link_epochs"] = (link.get("unpacked") or {}).get("epochs")
+    ok_run = set(failed) <= {"figures within tolerance of the lockstep reference"} \
+        and len(faults) == int((a.get("chaos") or {}).get("planned", -1)) \
+        and procs.get("link", {}).get("restarts") == kills
+    ok_gaps = out["chaos"]["gaps_inside"] and servo.get("gaps", 0) == len(gaps) \
+        and out["chaos"]["link_epochs"] == 1 + kills
 else:
     ok_run = int(run_status) == 0 and bool(a.get("passed")) and estimates >= 1 \
         and bool((a.get("agreement") or {}).get("agrees"))

@@ -545,8 +545,9 @@ fn stale_scan(prefix: &str) -> Result<Vec<PathBuf>> {
                 "node_monitor" | "node_monitor_context" | "node_monitor_owner_lock" => {
                     !alive.contains(&stem)
                 }
-                // <service>_<port>.data; <service>_<sender port>_<receiver port>.connection
-                "data" => stem
+                // <service>_<port>.data (or a resizable segment's <service>_<port>__<n>.data
+                // and __mgmt.data); <service>_<sender port>_<receiver port>.connection
+                "data" => segment_owner(&stem)
                     .rsplit('_')
                     .next()
                     .is_some_and(|p| !live_ports.contains(p)),
@@ -580,7 +581,7 @@ pub fn file_pids(path: &Path, prefix: &str) -> Vec<u32> {
         "connection" => 2,
         _ => return Vec::new(),
     };
-    let mut pids: Vec<u32> = stem
+    let mut pids: Vec<u32> = segment_owner(stem)
         .rsplit('_')
         .take(ports)
         .filter_map(|p| p.parse::<u128>().ok())
@@ -588,6 +589,13 @@ pub fn file_pids(path: &Path, prefix: &str) -> Vec<u32> {
         .collect();
     pids.reverse();
     pids
+}
+
+/// A data segment's name without the suffix of a resizable segment (iceoryx2 names those
+/// `<service>_<port>__<n>` and `<service>_<port>__mgmt`: publishers of slices that grow, the
+/// link's tunnel among them), so that it ends in its port's id as the others do.
+fn segment_owner(stem: &str) -> &str {
+    stem.split_once("__").map_or(stem, |(owner, _)| owner)
 }
 
 /// Files of stack `prefix` left in /dev/shm and under the iceoryx2 root.
@@ -650,4 +658,28 @@ pub fn is_node_counter(f: &Path) -> bool {
     f.file_name()
         .and_then(|n| n.to_str())
         .is_some_and(|n| n.ends_with(&suffix.to_string()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A port id is a `UniqueSystemId` whose bits 64–95 are the creating pid; a resizable
+    /// segment's `__<n>` and `__mgmt` suffixes name the same port as the plain segment.
+    #[test]
+    fn data_segments_name_the_process_of_their_port() {
+        let port: u128 = (4242u128 << 64) | 77;
+        let fp = file_prefix("ut");
+        for suffix in ["", "__0", "__3", "__mgmt"] {
+            let f = PathBuf::from(format!("/dev/shm/{fp}0354a2_{port}{suffix}.data"));
+            assert_eq!(file_pids(&f, "ut"), [4242], "{}", f.display());
+        }
+        let c = PathBuf::from(format!(
+            "/dev/shm/{fp}0354a2_{port}_{}.connection",
+            9u128 << 64
+        ));
+        assert_eq!(file_pids(&c, "ut"), [4242, 9]);
+        assert_eq!(segment_owner("svc_12__mgmt"), "svc_12");
+        assert_eq!(segment_owner("svc_12"), "svc_12");
+    }
 }

@@ -426,7 +426,7 @@ fn soak_fifty_random_kills() {
 /// Bad `afs chaos` input: a clear message and exit status 2, never a panic or a hang.
 #[test]
 fn bad_chaos_input_is_refused_clearly() {
-    let cases: [(&[&str], &str); 8] = [
+    let cases: [(&[&str], &str); 9] = [
         (&["chaos", "--faults", "kill-everything"], "unknown fault"),
         (&["chaos", "--kills", "100000"], "too many"),
         (
@@ -463,6 +463,8 @@ fn bad_chaos_input_is_refused_clearly() {
             ],
             "needs a scenario that probes the tangent",
         ),
+        // The built-in stack has no link board.
+        (&["chaos", "--faults", "kill-link"], "needs the link board"),
     ];
     for (args, needle) in cases {
         let out = afs()

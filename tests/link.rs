@@ -77,17 +77,26 @@ fn the_estimator_on_another_host_serves_the_servo_and_the_record_has_no_gap() {
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
 }
 
-/// The link cut for 12 s (host A's end of the veth pair down): host A's stack stays safe and
-/// keeps its own data (every check but the lockstep agreement holds: a request the cut
-/// outlasted is given up, as with a dead estimator); host B's recording resumes when the link
-/// is back, to the run's last tick, and its gaps are reported and lie where the link was cut.
+/// `afs chaos` on host A kills the link board and then cuts the link for 12 s (host A's end of
+/// the veth pair down, by the stack file's [chaos] commands): host A's stack stays safe and
+/// keeps its own data (every check but the lockstep agreement holds: a request a cut outlasts
+/// is given up, as with a dead estimator), the link board is restarted once; host B's
+/// recording resumes after each fault, to the run's last tick, and its gaps are reported and
+/// lie where the faults were, with the link board's own account agreeing.
 #[test]
-fn a_cut_link_shows_as_a_reported_gap_and_host_a_stays_safe() {
+fn a_killed_and_a_cut_link_show_as_reported_gaps_and_host_a_stays_safe() {
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let p = prefix("lc");
     let (code, v) = two_hosts(
         &p,
-        &["--duration", "30", "--cut-at", "8", "--cut-for", "12"],
+        &[
+            "--duration",
+            "30",
+            "--chaos",
+            "kill-link,cut-link",
+            "--cut-for",
+            "12",
+        ],
     );
     assert_eq!(code, 0, "{v:#}");
     assert_eq!(v["passed"], true, "{v:#}");
@@ -98,8 +107,23 @@ fn a_cut_link_shows_as_a_reported_gap_and_host_a_stays_safe() {
             .all(|c| c == "figures within tolerance of the lockstep reference"),
         "{failed:?}"
     );
-    assert_eq!(v["cut"]["gaps_inside"], true, "{v:#}");
+    let faults = v["chaos"]["faults"].as_array().unwrap();
+    let kinds: Vec<&str> = faults.iter().map(|f| f["kind"].as_str().unwrap()).collect();
+    assert_eq!(kinds, ["kill-link", "cut-link"], "{v:#}");
+    assert!(faults[0]["back_ms"].as_f64().is_some(), "{v:#}");
+    assert!(
+        faults[1]["note"]
+            .as_str()
+            .unwrap()
+            .contains("restored after"),
+        "{v:#}"
+    );
+    assert_eq!(v["run"]["link_board_restarts"], 1);
+    assert_eq!(v["chaos"]["link_epochs"], 2);
+    assert_eq!(v["chaos"]["gaps_inside"], true, "{v:#}");
     let missing = v["host_b"]["servo_missing"].as_u64().unwrap();
+    // Longer than zenoh's 10-s lease: the session closes, and the cut shows.
+    assert!(missing > 0, "a cut of 12 s must show: {v:#}");
     let gaps = v["host_b"]["servo_gaps"].as_array().unwrap();
     let listed: u64 = gaps.iter().map(|g| g["missing"].as_u64().unwrap()).sum();
     assert_eq!(listed, missing, "every missing sample is in a reported gap");
@@ -137,6 +161,20 @@ fn the_link_board_and_afs_record_refuse_bad_input() {
         .output()
         .unwrap();
     assert_refused(&out, &"no stack", "no stack with prefix 'lknone'");
+    // The two-host stack has a link board but no commands to cut it, and no estimator here.
+    let two = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/stack-two-hosts.toml");
+    for (fault, needle) in [
+        ("cut-link", "cut_link and restore_link"),
+        ("kill-estimator", "needs a process named 'estimator'"),
+    ] {
+        let out = afs()
+            .args([
+                "chaos", "--config", two, "--prefix", "lkbadc", "--faults", fault,
+            ])
+            .output()
+            .unwrap();
+        assert_refused(&out, &fault, needle);
+    }
 }
 
 /// `afs bench link` (short): every series measured, the link's servo stream complete on host

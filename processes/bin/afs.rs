@@ -183,7 +183,8 @@ enum Command {
     /// Kills (SIGKILL) the servo, sensor and estimator at random moments, also while the
     /// servo dithers to probe the tangent and while the estimator holds a request; freezes
     /// (SIGSTOP) the sensor and the estimator; sends bursts of bad force samples (NaN,
-    /// infinite, absurd, repeated, backwards, from the future). The summary adds each fault's
+    /// infinite, absurd, repeated, backwards, from the future); kills the link board and cuts
+    /// the link to another host. The summary adds each fault's
     /// recovery, the safe-state latency, the largest normal force, the bad samples sent and
     /// counted, and shared and resident memory before and after (docs/reliability.md).
     /// Exits with status 1 if a check fails, 2 on an error.
@@ -195,11 +196,14 @@ enum Command {
         /// that holds it.
         #[arg(long, default_value_t = 10)]
         kills: usize,
-        /// Fault kinds to draw from, comma-separated (default: all the scenario allows):
-        /// kill-servo, kill-sensor, kill-estimator, kill-servo-mid-probe,
+        /// Fault kinds to draw from, comma-separated (default: all the scenario and the stack
+        /// file allow): kill-servo, kill-sensor, kill-estimator, kill-servo-mid-probe,
         /// kill-sensor-mid-probe, kill-estimator-mid-request, freeze-servo, freeze-sensor,
-        /// freeze-estimator, bad-samples. The mid-probe and mid-request kinds ask the servo for
-        /// a tangent probe when due: surface-tracking and corner only.
+        /// freeze-estimator, bad-samples, kill-link, cut-link. The mid-probe and mid-request
+        /// kinds ask the servo for a tangent probe when due: surface-tracking and corner only.
+        /// kill-link needs the link board (a process named `link`), cut-link also the
+        /// commands that cut and restore the link (the stack file's [chaos] table,
+        /// docs/link.md).
         #[arg(long, value_delimiter = ',')]
         faults: Vec<String>,
         /// Take the --faults kinds in turn, in the order given, instead of at random.

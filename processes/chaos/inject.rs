@@ -6,7 +6,9 @@
 //! needs the servo to probe the tangent (mid-probe, mid-request) asks the servo for a probe
 //! when it is due, or takes the probe under way, and strikes when the strokes start. One fault
 //! is in progress at a time; a fault waits until its board's data has flowed for
-//! [`MIN_UPTIME`].
+//! [`MIN_UPTIME`]. The link's faults (docs/link.md) kill the link board, or ask the supervisor
+//! to run the stack file's commands that cut the link and, [`Injector::with_cut`] later,
+//! restore it.
 
 use crate::ipc::Svc;
 use crate::rt;
@@ -75,6 +77,10 @@ pub enum Action {
         /// The servo's estimations started, as last seen.
         started_before: u32,
     },
+    /// Send a signal to the link board.
+    SignalLink(i32),
+    /// Cut the link (true) or restore it (false) with the stack file's commands.
+    CutLink(bool),
 }
 
 /// One fault as it went.
@@ -138,6 +144,15 @@ enum Phase {
         since: Instant,
         pid: i32,
     },
+    /// The link board killed; waiting for its restart.
+    LinkRecovering {
+        since: Instant,
+        pid: i32,
+    },
+    /// The link cut; restored at this instant.
+    Cut {
+        until: Instant,
+    },
 }
 
 /// Injects the planned faults.
@@ -153,6 +168,8 @@ pub struct Injector {
     probes_cut_short: u32,
     /// Probes asked for the pending fault.
     probes_asked: u32,
+    /// How long a cut lasts.
+    cut_for: Duration,
 }
 
 impl Injector {
@@ -168,6 +185,27 @@ impl Injector {
             bad: BadCounts::default(),
             probes_cut_short: 0,
             probes_asked: 0,
+            cut_for: Duration::from_secs(5),
+        }
+    }
+
+    /// Cuts of the link last `cut_for`.
+    pub fn with_cut(self, cut_for: Duration) -> Self {
+        Self { cut_for, ..self }
+    }
+
+    /// The link is cut now: the supervisor restores it if the run ends first.
+    pub fn cutting(&self) -> bool {
+        matches!(self.phase, Phase::Cut { .. })
+    }
+
+    /// Notes `what` on the newest fault's record (a command that failed, say).
+    pub fn note(&mut self, what: &str) {
+        if let Some(r) = self.records.last_mut() {
+            if !r.note.is_empty() {
+                r.note.push_str("; ");
+            }
+            r.note.push_str(what);
         }
     }
 
@@ -204,13 +242,24 @@ impl Injector {
             .count() as u32
     }
 
+    /// Planned kills of the link board (the restarts they cost are not held against its
+    /// budget).
+    pub fn planned_link_kills(&self) -> u32 {
+        self.plan
+            .iter()
+            .filter(|f| f.kind == FaultKind::KillLink)
+            .count() as u32
+    }
+
     /// One supervisor iteration: simulated time, the servo's controller, the boards (servo,
-    /// sensor, estimator), the newest genuine force sample. Returns what to do.
+    /// sensor, estimator), the link board (pid 0 when none; its data counts as flowing from
+    /// its start), the newest genuine force sample. Returns what to do.
     pub fn step(
         &mut self,
         sim_s: f64,
         servo: ServoView,
         boards: &[BoardView; 3],
+        link: BoardView,
         genuine: Option<&WrenchSample>,
     ) -> Vec<Action> {
         let now = Instant::now();
@@ -232,7 +281,14 @@ impl Injector {
                 let Some(f) = self.plan.get(self.next).copied() else {
                     return out;
                 };
-                if sim_s < f.at_s || f.kind.target().is_some_and(|b| !ready(b)) {
+                let link_up = link.pid != 0
+                    && link
+                        .data_since
+                        .is_some_and(|t| now.duration_since(t) >= MIN_UPTIME);
+                if sim_s < f.at_s
+                    || f.kind.target().is_some_and(|b| !ready(b))
+                    || (f.kind.needs_link() && !link_up)
+                {
                     return out;
                 }
                 match f.kind {
@@ -262,6 +318,51 @@ impl Injector {
                         }
                         None => Phase::Idle,
                     },
+                    FaultKind::KillLink => {
+                        self.record(sim_s, mode, link.pid, "");
+                        out.push(Action::SignalLink(libc::SIGKILL));
+                        Phase::LinkRecovering {
+                            since: now,
+                            pid: link.pid,
+                        }
+                    }
+                    FaultKind::CutLink => {
+                        self.record(sim_s, mode, 0, "");
+                        out.push(Action::CutLink(true));
+                        Phase::Cut {
+                            until: now + self.cut_for,
+                        }
+                    }
+                }
+            }
+            Phase::Cut { until } if now >= until => {
+                out.push(Action::CutLink(false));
+                self.note(&format!(
+                    "restored after {:.1} s",
+                    self.cut_for.as_secs_f64()
+                ));
+                self.next += 1;
+                Phase::Idle
+            }
+            p @ Phase::Cut { .. } => p,
+            Phase::LinkRecovering { since, pid } => {
+                if link.pid != 0 && link.pid != pid {
+                    if let Some(r) = self.records.last_mut() {
+                        r.back_ms = link
+                            .data_since
+                            .map(|t| t.saturating_duration_since(since).as_secs_f64() * 1e3);
+                    }
+                    self.next += 1;
+                    Phase::Idle
+                } else if now.duration_since(since) > RECOVERY_WAIT {
+                    self.note(&format!(
+                        "the link board not back within {} s",
+                        RECOVERY_WAIT.as_secs()
+                    ));
+                    self.next += 1;
+                    Phase::Idle
+                } else {
+                    Phase::LinkRecovering { since, pid }
                 }
             }
             Phase::WaitProbe { since_s, asked } => {
@@ -510,39 +611,61 @@ mod tests {
             stall_policy: true,
         };
         let boards = [up; 3];
+        let link = BoardView::default();
         let servo = |mode, started| ServoView {
             mode: Some(mode),
             started,
         };
         use ServoMode::*;
-        assert!(inj.step(0.5, servo(Track, 0), &boards, None).is_empty());
-        assert!(inj.step(1.0, servo(Track, 0), &boards, None).is_empty());
-        assert_eq!(asked(&inj.step(1.01, servo(Track, 0), &boards, None)), [0]);
-        // Not again at once, nor while the servo stops.
-        assert!(inj.step(1.02, servo(Track, 0), &boards, None).is_empty());
-        assert!(inj.step(1.1, servo(Stopping, 1), &boards, None).is_empty());
-        assert_eq!(
-            signals(&inj.step(1.5, servo(Probing, 1), &boards, None)),
-            [libc::SIGSTOP]
+        assert!(
+            inj.step(0.5, servo(Track, 0), &boards, link, None)
+                .is_empty()
         );
-        assert!(inj.step(1.6, servo(Probing, 1), &boards, None).is_empty());
-        // The servo's safe state aborts the probe: no request will come.
-        let thaw = inj.step(1.7, servo(Resuming, 1), &boards, None);
-        assert_eq!(signals(&thaw), [libc::SIGCONT]);
-        assert!(thaw.contains(&Action::Hold(Board::Estimator, false)));
-        assert!(inj.records().is_empty());
-        assert_eq!(asked(&inj.step(2.0, servo(Track, 1), &boards, None)), [1]);
+        assert!(
+            inj.step(1.0, servo(Track, 0), &boards, link, None)
+                .is_empty()
+        );
         assert_eq!(
-            signals(&inj.step(3.0, servo(Probing, 2), &boards, None)),
+            asked(&inj.step(1.01, servo(Track, 0), &boards, link, None)),
+            [0]
+        );
+        // Not again at once, nor while the servo stops.
+        assert!(
+            inj.step(1.02, servo(Track, 0), &boards, link, None)
+                .is_empty()
+        );
+        assert!(
+            inj.step(1.1, servo(Stopping, 1), &boards, link, None)
+                .is_empty()
+        );
+        assert_eq!(
+            signals(&inj.step(1.5, servo(Probing, 1), &boards, link, None)),
             [libc::SIGSTOP]
         );
         assert!(
-            inj.step(4.0, servo(AwaitingEstimate, 2), &boards, None)
+            inj.step(1.6, servo(Probing, 1), &boards, link, None)
+                .is_empty()
+        );
+        // The servo's safe state aborts the probe: no request will come.
+        let thaw = inj.step(1.7, servo(Resuming, 1), &boards, link, None);
+        assert_eq!(signals(&thaw), [libc::SIGCONT]);
+        assert!(thaw.contains(&Action::Hold(Board::Estimator, false)));
+        assert!(inj.records().is_empty());
+        assert_eq!(
+            asked(&inj.step(2.0, servo(Track, 1), &boards, link, None)),
+            [1]
+        );
+        assert_eq!(
+            signals(&inj.step(3.0, servo(Probing, 2), &boards, link, None)),
+            [libc::SIGSTOP]
+        );
+        assert!(
+            inj.step(4.0, servo(AwaitingEstimate, 2), &boards, link, None)
                 .is_empty()
         );
         std::thread::sleep(REQUEST_KILL_DELAY);
         assert_eq!(
-            signals(&inj.step(4.1, servo(AwaitingEstimate, 2), &boards, None)),
+            signals(&inj.step(4.1, servo(AwaitingEstimate, 2), &boards, link, None)),
             [libc::SIGKILL]
         );
         let r = &inj.records()[0];
@@ -560,5 +683,86 @@ mod tests {
         );
         let left = ipc::release_prefix(&prefix).unwrap();
         assert!(left.is_empty(), "{left:?}");
+    }
+
+    /// The link's faults wait for a link board that has been up a while; a kill signals it and
+    /// is over when another one runs, and a cut asks for the cut, then for the restore once
+    /// its time is up.
+    #[test]
+    fn the_link_is_killed_and_cut_then_restored() {
+        let prefix = format!("ut_chaos_link_{}", std::process::id());
+        let node = ipc::node(&prefix, "injector_test").unwrap();
+        let service = ipc::wrench(&node).unwrap();
+        let publisher = service.publisher_builder().create().unwrap();
+        let plan = vec![
+            PlannedFault {
+                at_s: 1.0,
+                kind: FaultKind::KillLink,
+            },
+            PlannedFault {
+                at_s: 2.0,
+                kind: FaultKind::CutLink,
+            },
+        ];
+        let cut_for = Duration::from_millis(30);
+        let mut inj = Injector::new(plan, publisher).with_cut(cut_for);
+        let long_ago = Instant::now().checked_sub(Duration::from_secs(5));
+        let up = |pid| BoardView {
+            pid,
+            data_since: long_ago,
+            stall_policy: false,
+        };
+        let boards = [up(42); 3];
+        let servo = ServoView::default();
+        let just_started = BoardView {
+            data_since: Some(Instant::now()),
+            ..up(7)
+        };
+        // No link board, or one just started: the fault waits.
+        assert!(
+            inj.step(1.5, servo, &boards, BoardView::default(), None)
+                .is_empty()
+        );
+        assert!(inj.step(1.5, servo, &boards, just_started, None).is_empty());
+        assert_eq!(
+            inj.step(1.5, servo, &boards, up(7), None),
+            [Action::SignalLink(libc::SIGKILL)]
+        );
+        assert!(!inj.idle());
+        // Not back while the killed one's pid is shown, or none runs.
+        assert!(inj.step(1.6, servo, &boards, up(7), None).is_empty());
+        assert!(
+            inj.step(1.6, servo, &boards, BoardView::default(), None)
+                .is_empty()
+        );
+        let back = BoardView {
+            data_since: Some(Instant::now()),
+            ..up(8)
+        };
+        assert!(inj.step(1.7, servo, &boards, back, None).is_empty());
+        assert!(inj.idle());
+        assert_eq!(inj.records()[0].kind, "kill-link");
+        assert_eq!(inj.records()[0].pid, 7);
+        assert!(inj.records()[0].back_ms.is_some());
+        // The cut, once the new link board has been up for a while.
+        let old = up(8);
+        assert!(inj.step(1.9, servo, &boards, old, None).is_empty());
+        assert_eq!(
+            inj.step(2.0, servo, &boards, old, None),
+            [Action::CutLink(true)]
+        );
+        assert!(inj.cutting());
+        assert!(inj.step(2.01, servo, &boards, old, None).is_empty());
+        std::thread::sleep(cut_for);
+        assert_eq!(
+            inj.step(2.1, servo, &boards, old, None),
+            [Action::CutLink(false)]
+        );
+        assert!(inj.done() && !inj.cutting());
+        let r = &inj.records()[1];
+        assert_eq!((r.kind.as_str(), r.pid), ("cut-link", 0));
+        assert!(r.note.contains("restored after"), "{}", r.note);
+        drop((inj, service, node));
+        let _ = ipc::release_prefix(&prefix);
     }
 }

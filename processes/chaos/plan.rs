@@ -2,7 +2,7 @@
 //! the stack file's policies and the scenario's probe ([`afs_shared::faults::plan`] places them).
 
 use super::inject::{MIN_UPTIME, THAW_AFTER};
-use crate::supervisor::{ChaosOptions, ProcessSpec, StackFile};
+use crate::supervisor::{ChaosOptions, LINK_PROCESS, ProcessSpec, StackFile};
 use afs_shared::faults::{self, FaultKind};
 use afs_shared::msg::Board;
 use afs_shared::scenario::{self, Scenario};
@@ -31,19 +31,43 @@ pub fn plan(
         );
     }
     let probes = scenario.cfg.servo.tracking.enabled;
+    // Why the stack cannot take a kind (None: it can).
+    let lacks = |k: FaultKind| -> Option<String> {
+        if k.needs_probe() && !probes {
+            return Some(format!(
+                "needs a scenario that probes the tangent (surface-tracking, corner); {} does not",
+                stack.scenario
+            ));
+        }
+        if let Some(b) = k.target()
+            && stack.spec(b).is_none()
+        {
+            return Some(format!(
+                "needs a process named '{}' in the stack file (on another host, it is not this supervisor's to fault)",
+                b.name()
+            ));
+        }
+        if k.needs_link() && stack.link().is_none() {
+            return Some(format!(
+                "needs the link board, a process named '{LINK_PROCESS}' (docs/link.md)"
+            ));
+        }
+        if k == FaultKind::CutLink && stack.link_cut().is_none() {
+            return Some(
+                "needs the commands that cut and restore the link: cut_link and restore_link in the stack file's [chaos] table (docs/link.md)".into(),
+            );
+        }
+        None
+    };
     let kinds: Vec<FaultKind> = if c.kinds.is_empty() {
         FaultKind::ALL
             .iter()
             .map(|(_, k)| *k)
-            .filter(|k| probes || !k.needs_probe())
+            .filter(|k| lacks(*k).is_none())
             .collect()
     } else {
-        if let Some(k) = c.kinds.iter().find(|k| k.needs_probe() && !probes) {
-            bail!(
-                "{} needs a scenario that probes the tangent (surface-tracking, corner); {} does not",
-                k.name(),
-                stack.scenario
-            );
+        if let Some((k, why)) = c.kinds.iter().find_map(|k| Some((k, lacks(*k)?))) {
+            bail!("{} {why}", k.name());
         }
         c.kinds.clone()
     };
@@ -65,6 +89,10 @@ pub fn plan(
         retry_s: crate::boards::servo::ESTIMATOR_TIMEOUT_S + 0.5,
         thaw_s: THAW_AFTER.as_secs_f64(),
         burst_s: 0.05,
+        link_backoff_s: ms(stack.link().map(|p| p.backoff_ms)),
+        link_up_s: LINK_UP_S,
+        cut_s: stack.cut_for_s(),
+        link_lease_s: ZENOH_LEASE_S,
     };
     // A traverse can end before the duration.
     let end = match scenario.end_u_m {
@@ -88,6 +116,15 @@ pub fn plan(
 /// A board's start-up beyond its backoff, with margin, in a fault's span (s): restarts take
 /// 20–70 ms beyond the backoff (docs/reliability.md).
 const START_ALLOWANCE_S: f64 = 0.3;
+
+/// From the link board's start, or a cut's end, until the tunnel carries again, with margin
+/// (s): zenoh retries its connection about every second, and the tunnel discovers every
+/// 100 ms (docs/link.md: a 12-s cut showed as 14.0 s of missing samples on host B).
+const LINK_UP_S: f64 = 3.0;
+
+/// zenoh's lease, as the link board leaves it (s): a cut longer than this closes zenoh's
+/// session (docs/link.md).
+const ZENOH_LEASE_S: f64 = 10.0;
 
 /// Most faults one chaos run takes.
 pub const MAX_FAULTS: usize = 10_000;

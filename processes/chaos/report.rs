@@ -56,6 +56,10 @@ pub struct BackAfterKill {
     pub frozen_sensor: BackSummary,
     /// Estimator frozen.
     pub frozen_estimator: BackSummary,
+    /// Link board killed (back: its restart's start; the tunnel's return shows on the other
+    /// host, docs/link.md).
+    #[serde(default)]
+    pub link: BackSummary,
 }
 
 /// Bad samples sent, and what the (last) servo's gate counted.
@@ -124,6 +128,7 @@ impl ChaosReport {
                 frozen_servo: BackSummary::of(&faults, "freeze-servo"),
                 frozen_sensor: BackSummary::of(&faults, "freeze-sensor"),
                 frozen_estimator: BackSummary::of(&faults, "freeze-estimator"),
+                link: BackSummary::of(&faults, "kill-link"),
             },
             freeze_detected_ms_max: max_of(&detected),
             back_beyond_backoff_ms_max: max_of(&beyond_backoff(&faults)),
@@ -260,11 +265,12 @@ impl fmt::Display for ChaosReport {
 }
 
 /// For each killed board that came back, the time its data took beyond the restart backoff
-/// (ms): start-up, clean-up and the supervisor's polling.
+/// (ms): start-up, clean-up and the supervisor's polling (not the link board, whose data
+/// flows on the other host).
 fn beyond_backoff(records: &[FaultRecord]) -> Vec<f64> {
     records
         .iter()
-        .filter(|r| r.kind.starts_with("kill-"))
+        .filter(|r| r.kind.starts_with("kill-") && r.kind != "kill-link")
         .filter_map(|r| Some(r.back_ms? - r.restart?.backoff_ms?))
         .collect()
 }

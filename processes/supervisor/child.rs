@@ -274,6 +274,16 @@ impl Proc {
         }
     }
 
+    /// What the fault injector sees of a process without a data stream of its own (the link
+    /// board): its data counts as flowing from its start.
+    pub fn view_from_start(&self) -> BoardView {
+        let v = self.view();
+        BoardView {
+            data_since: (v.pid != 0).then_some(self.started),
+            ..v
+        }
+    }
+
     /// Its pid (0: none).
     pub fn pid(&self) -> i32 {
         self.child.as_ref().map_or(0, |c| c.id() as i32)

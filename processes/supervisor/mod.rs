@@ -32,7 +32,7 @@ pub use report::*;
 pub use stack::*;
 pub use status::*;
 
-use crate::chaos::{self, ChaosReport, Injector};
+use crate::chaos::{self, ChaosReport, Injector, LinkCut};
 use crate::ipc;
 use crate::tools::record::Recorder;
 use crate::tools::view::LiveView;
@@ -164,10 +164,13 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunReport> {
                 .publisher_builder()
                 .create()
                 .context("creating the bad-sample publisher")?;
-            let inj = Injector::new(plan, publisher);
+            let inj = Injector::new(plan, publisher)
+                .with_cut(std::time::Duration::from_secs_f64(stack.cut_for_s()));
             for p in procs.iter_mut() {
                 if let Some(b) = p.board {
                     p.injected_budget = inj.planned_for(b);
+                } else if p.spec.name == LINK_PROCESS {
+                    p.injected_budget = inj.planned_link_kills();
                 }
             }
             Some(inj)
@@ -178,6 +181,11 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunReport> {
     let mut sup = Supervisor::new(procs, launch, &scenario, duration, ports)
         .with_sinks(Sinks { recorder, view })
         .injecting(injector)
+        .cutting_with(
+            stack
+                .link_cut()
+                .map(|(cut, restore)| LinkCut::new(cut, restore)),
+        )
         .with_progress(opts.progress);
     let result = sup.run(stop);
     let wall_s = sup.shut_down();

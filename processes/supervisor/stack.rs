@@ -90,7 +90,36 @@ pub struct StackFile {
     pub sim: Option<toml::Table>,
     /// The processes.
     pub process: Vec<ProcessSpec>,
+    /// What `afs chaos` needs beyond the processes.
+    #[serde(default)]
+    pub chaos: Option<ChaosTable>,
 }
+
+/// The `[chaos]` table: how to cut the link and restore it (the `cut-link` fault; on real
+/// hosts, a command that downs an interface or adds a firewall rule, and its inverse).
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChaosTable {
+    /// The command that cuts the link (program and arguments, run as they are).
+    #[serde(default)]
+    pub cut_link: Vec<String>,
+    /// The command that restores it.
+    #[serde(default)]
+    pub restore_link: Vec<String>,
+    /// How long a cut lasts (s).
+    #[serde(default = "default_cut_for")]
+    pub cut_for_s: f64,
+}
+
+fn default_cut_for() -> f64 {
+    DEFAULT_CUT_FOR_S
+}
+
+/// How long a cut of the link lasts without a `[chaos]` table saying (s).
+const DEFAULT_CUT_FOR_S: f64 = 5.0;
+
+/// The name of the link board's process (docs/link.md), which the link's faults address.
+pub const LINK_PROCESS: &str = "link";
 
 impl StackFile {
     /// Parses and checks a stack file's text (`origin` names it in errors).
@@ -133,12 +162,45 @@ impl StackFile {
                 );
             }
         }
+        if let Some(c) = &self.chaos {
+            if c.cut_link.is_empty() != c.restore_link.is_empty() {
+                bail!(
+                    "[chaos]: cut_link and restore_link go together (a cut must be restored); give both or neither"
+                );
+            }
+            if !(c.cut_for_s.is_finite() && (0.1..=600.0).contains(&c.cut_for_s)) {
+                bail!(
+                    "[chaos]: cut_for_s = {} must be a number of seconds in [0.1, 600]",
+                    c.cut_for_s
+                );
+            }
+        }
         for role in [Board::Servo, Board::Sensor] {
             if self.spec(role).is_none() {
                 bail!("the graph needs a process named '{}'", role.name());
             }
         }
         Ok(())
+    }
+
+    /// The link board's process, if the graph has one.
+    pub fn link(&self) -> Option<&ProcessSpec> {
+        self.process.iter().find(|p| p.name == LINK_PROCESS)
+    }
+
+    /// The commands that cut and restore the link, if the stack file gives them.
+    pub fn link_cut(&self) -> Option<(&[String], &[String])> {
+        self.chaos
+            .as_ref()
+            .filter(|c| !c.cut_link.is_empty())
+            .map(|c| (c.cut_link.as_slice(), c.restore_link.as_slice()))
+    }
+
+    /// How long a cut of the link lasts (s).
+    pub fn cut_for_s(&self) -> f64 {
+        self.chaos
+            .as_ref()
+            .map_or(DEFAULT_CUT_FOR_S, |c| c.cut_for_s)
     }
 
     /// The process of a board, if the graph has it.

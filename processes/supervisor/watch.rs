@@ -2,9 +2,10 @@
 //! (reaped, restarted, killed when stalled), the status stream and the progress line.
 
 use super::FAULT_SETTLE_S;
+use super::LINK_PROCESS;
 use super::child::{Ended, Launch, Proc};
 use super::footprint::Footprint;
-use crate::chaos::{Action, BoardView, Injector, ServoView};
+use crate::chaos::{Action, BoardView, Injector, LinkCut, ServoView};
 use crate::ipc::{self, Svc};
 use crate::rt;
 use crate::tools::record::{Rec, RecordSummary, Recorder};
@@ -124,6 +125,8 @@ pub struct Supervisor<'a> {
     sinks: Sinks,
     /// The fault injector (`afs chaos`).
     pub injector: Option<Injector>,
+    /// The commands that cut the link and restore it.
+    link_cut: Option<LinkCut>,
     /// The scenario's figures from the samples.
     pub monitor: ScenarioMonitor,
     /// Safety figures.
@@ -179,6 +182,7 @@ impl<'a> Supervisor<'a> {
             ports,
             sinks: Sinks::default(),
             injector: None,
+            link_cut: None,
             monitor: scenario.monitor(),
             faults: FaultMonitor::new(scenario.cfg.servo.hybrid.preload_n, FAULT_SETTLE_S),
             steady: [None, None],
@@ -212,6 +216,11 @@ impl<'a> Supervisor<'a> {
     /// Injects faults with `injector`.
     pub fn injecting(self, injector: Option<Injector>) -> Self {
         Self { injector, ..self }
+    }
+
+    /// Cuts the link with `link_cut`'s commands when the injector asks.
+    pub fn cutting_with(self, link_cut: Option<LinkCut>) -> Self {
+        Self { link_cut, ..self }
     }
 
     /// Prints a progress line on stderr when `progress`.
@@ -406,11 +415,22 @@ impl<'a> Supervisor<'a> {
                 views[b as usize] = p.view();
             }
         }
-        let all_up = views.iter().all(|v| {
-            v.pid != 0
-                && v.data_since
-                    .is_some_and(|t| t.elapsed() > Duration::from_millis(500))
-        });
+        // The link board has no data stream here: it counts as up from its start.
+        let link = self
+            .procs
+            .iter()
+            .find(|p| p.spec.name == LINK_PROCESS)
+            .map_or_else(BoardView::default, Proc::view_from_start);
+        // Every board of this graph up (on a two-host stack the estimator is elsewhere).
+        let all_up = Board::ALL
+            .iter()
+            .filter(|b| self.procs.iter().any(|p| p.board == Some(**b)))
+            .all(|b| {
+                let v = views[*b as usize];
+                v.pid != 0
+                    && v.data_since
+                        .is_some_and(|t| t.elapsed() > Duration::from_millis(500))
+            });
         if all_up && inj.idle() {
             let slot = if inj.records().is_empty() {
                 Some(0)
@@ -425,10 +445,17 @@ impl<'a> Supervisor<'a> {
                 self.steady[slot] = Some(Footprint::now(&self.launch.prefix, &self.procs, self.t0));
             }
         }
+        if let Some(c) = self.link_cut.as_mut() {
+            for e in c.poll() {
+                eprintln!("afs: warning: {e}");
+                inj.note(&e);
+            }
+        }
         let actions = inj.step(
             self.last_time_s,
             self.servo_view,
             &views,
+            link,
             self.genuine.as_ref(),
         );
         for a in actions {
@@ -441,6 +468,22 @@ impl<'a> Supervisor<'a> {
                 Action::Hold(b, h) => {
                     if let Some(p) = self.proc_mut(b) {
                         p.held = h;
+                    }
+                }
+                Action::SignalLink(sig) => {
+                    if let Some(p) = self.procs.iter().find(|p| p.spec.name == LINK_PROCESS) {
+                        p.signal(sig);
+                    }
+                }
+                Action::CutLink(cut) => {
+                    // The plan has no cut without the commands (chaos::plan).
+                    if let Some(c) = self.link_cut.as_mut()
+                        && let Err(e) = c.start(cut)
+                    {
+                        eprintln!("afs: warning: {e}");
+                        if let Some(inj) = self.injector.as_mut() {
+                            inj.note(&e);
+                        }
                     }
                 }
                 Action::AskProbe { started_before } => {
@@ -582,6 +625,16 @@ impl<'a> Supervisor<'a> {
     /// run took (s).
     pub fn shut_down(&mut self) -> f64 {
         let wall_s = self.t0.elapsed().as_secs_f64();
+        // A cut outlasting the run is restored first: the link is the machine's, not the run's.
+        if let (Some(inj), Some(c)) = (self.injector.as_mut(), self.link_cut.as_mut())
+            && inj.cutting()
+        {
+            inj.note("restored at the run's end");
+            for e in c.restore_now() {
+                eprintln!("afs: warning: {e}");
+                inj.note(&e);
+            }
+        }
         // Observers (`afs view`) leave on this, before the prefix is released.
         self.send_status(msg::SupervisorPhase::Stopping);
         for b in [Board::Servo, Board::Estimator, Board::Sensor] {

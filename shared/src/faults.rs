@@ -26,11 +26,17 @@ pub enum FaultKind {
     Freeze(Board),
     /// A burst of bad force samples on the wrench stream, one of each [`BadSample`].
     BadSamples,
+    /// SIGKILL of the link board (the process named `link`, docs/link.md): its supervisor
+    /// restarts it and the tunnel comes up again.
+    KillLink,
+    /// The link cut for a while: the stack file's own commands take the network down and up
+    /// again (on one machine, `examples/two-hosts.sh` downs its veth pair).
+    CutLink,
 }
 
 impl FaultKind {
     /// Every kind, by its command-line name.
-    pub const ALL: [(&'static str, FaultKind); 10] = [
+    pub const ALL: [(&'static str, FaultKind); 12] = [
         ("kill-servo", FaultKind::Kill(Board::Servo)),
         ("kill-sensor", FaultKind::Kill(Board::Sensor)),
         ("kill-estimator", FaultKind::Kill(Board::Estimator)),
@@ -50,6 +56,8 @@ impl FaultKind {
         ("freeze-sensor", FaultKind::Freeze(Board::Sensor)),
         ("freeze-estimator", FaultKind::Freeze(Board::Estimator)),
         ("bad-samples", FaultKind::BadSamples),
+        ("kill-link", FaultKind::KillLink),
+        ("cut-link", FaultKind::CutLink),
     ];
 
     /// The kind named `name` (one of [`FaultKind::ALL`]).
@@ -82,12 +90,18 @@ impl FaultKind {
         )
     }
 
-    /// The board the fault ends (None: the bad-sample burst ends nothing).
+    /// True for the kinds that need a link board in the graph (a process named `link`).
+    pub fn needs_link(self) -> bool {
+        matches!(self, FaultKind::KillLink | FaultKind::CutLink)
+    }
+
+    /// The board the fault ends (None: the bad-sample burst and the link's faults end no
+    /// board of the control loop).
     pub fn target(self) -> Option<Board> {
         match self {
             FaultKind::Kill(b) | FaultKind::KillMidProbe(b) | FaultKind::Freeze(b) => Some(b),
             FaultKind::KillEstimatorMidRequest => Some(Board::Estimator),
-            FaultKind::BadSamples => None,
+            FaultKind::BadSamples | FaultKind::KillLink | FaultKind::CutLink => None,
         }
     }
 }
@@ -221,6 +235,17 @@ pub struct FaultSpans {
     pub thaw_s: f64,
     /// A bad-sample burst (s).
     pub burst_s: f64,
+    /// The link board's restart backoff (s).
+    pub link_backoff_s: f64,
+    /// From the link board's start, or the end of a cut, until the tunnel carries again:
+    /// zenoh's connection retries and the tunnel's discovery, with margin (s).
+    pub link_up_s: f64,
+    /// How long a cut lasts (s).
+    pub cut_s: f64,
+    /// zenoh's lease (s): a cut longer than this closes the session, which reconnects within
+    /// `link_up_s` of the link's return; a shorter one leaves it to TCP, whose retransmission
+    /// backoff doubles, so that data flows again up to the cut's own length after its end.
+    pub link_lease_s: f64,
 }
 
 impl FaultSpans {
@@ -242,6 +267,15 @@ impl FaultSpans {
                 self.probe_start_s + self.probe_s + self.retry_s + restart(Board::Estimator)
             }
             FaultKind::BadSamples => self.burst_s,
+            FaultKind::KillLink => self.link_backoff_s + self.start_s + self.link_up_s,
+            FaultKind::CutLink => {
+                let tcp = if self.cut_s > self.link_lease_s {
+                    0.0
+                } else {
+                    self.cut_s
+                };
+                self.cut_s + tcp + self.link_up_s
+            }
         }
     }
 
@@ -259,6 +293,10 @@ impl FaultSpans {
                 self.retry_s,
                 self.thaw_s,
                 self.burst_s,
+                self.link_backoff_s,
+                self.link_up_s,
+                self.cut_s,
+                self.link_lease_s,
             ])
             .all(|v| v.is_finite() && *v >= 0.0);
         if all && self.burst_s > 0.0 {
@@ -706,6 +744,10 @@ mod tests {
             retry_s: 1.5,
             thaw_s: 1.0,
             burst_s: 0.05,
+            link_backoff_s: 0.2,
+            link_up_s: 3.0,
+            cut_s: 5.0,
+            link_lease_s: 10.0,
         }
     }
 
@@ -750,6 +792,24 @@ mod tests {
             assert_eq!(k.name(), name);
         }
         assert!(FaultKind::from_name("kill-everything").is_err());
+        // The link's faults end no board of the control loop and need a link board; a kill
+        // takes the restart and the tunnel's return, a cut its length and the return.
+        for k in [FaultKind::KillLink, FaultKind::CutLink] {
+            assert!(k.needs_link() && !k.needs_probe() && k.target().is_none());
+        }
+        assert!(
+            FaultKind::ALL
+                .iter()
+                .filter(|(_, k)| k.needs_link())
+                .count()
+                == 2
+        );
+        assert!((sp.span(FaultKind::KillLink) - 3.5).abs() < 1e-12);
+        // Within the lease TCP's backoff may hold the data as long again; beyond it zenoh
+        // reconnects.
+        assert!((sp.span(FaultKind::CutLink) - 13.0).abs() < 1e-12);
+        let long = FaultSpans { cut_s: 12.0, ..sp };
+        assert!((long.span(FaultKind::CutLink) - 15.0).abs() < 1e-12);
         // 8 faults of every kind in the 18 s of a 20-s run, at 200 seeds: the mid-request kill
         // (its span is 11.3 s) is drawn at most once, and every plan fits.
         for seed in 0..200 {
