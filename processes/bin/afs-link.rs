@@ -267,23 +267,11 @@ fn run(cli: &Cli) -> Result<Summary> {
             while let Ok(Some(s)) = sub.receive() {
                 got = true;
                 sum.servo_read += 1;
-                packer.push(s.payload(), |b| {
-                    let mut b = *b;
-                    b.publish_ns = afs::rt::monotonic_ns();
-                    if publ.send_copy(b).is_ok() {
-                        sum.batches_sent += 1;
-                    }
-                });
+                packer.push(s.payload(), |b| send_batch(publ, b, &mut sum.batches_sent));
             }
             if !got {
                 // The stream paused (or ended): send what is packed.
-                packer.flush(|b| {
-                    let mut b = *b;
-                    b.publish_ns = afs::rt::monotonic_ns();
-                    if publ.send_copy(b).is_ok() {
-                        sum.batches_sent += 1;
-                    }
-                });
+                packer.flush(|b| send_batch(publ, b, &mut sum.batches_sent));
             }
         }
         if last_discovery.elapsed() >= Duration::from_millis(100) {
@@ -325,13 +313,7 @@ fn run(cli: &Cli) -> Result<Summary> {
     }
     // Stopping: send what is packed and give the tunnel a moment to carry it.
     if let Some(publ) = &batch_pub {
-        packer.flush(|b| {
-            let mut b = *b;
-            b.publish_ns = afs::rt::monotonic_ns();
-            if publ.send_copy(b).is_ok() {
-                sum.batches_sent += 1;
-            }
-        });
+        packer.flush(|b| send_batch(publ, b, &mut sum.batches_sent));
         for _ in 0..50 {
             let _ = link.propagate();
             std::thread::sleep(Duration::from_millis(2));
@@ -344,6 +326,19 @@ fn run(cli: &Cli) -> Result<Summary> {
     }
     sum.bridged = !link.bridges().empty();
     Ok(sum)
+}
+
+/// Stamps a packed batch with its publication time and sends it, counting it in `sent`.
+fn send_batch(
+    publ: &iceoryx2::port::publisher::Publisher<ipc::Svc, msg::ServoBatch, ()>,
+    b: &msg::ServoBatch,
+    sent: &mut u64,
+) {
+    let mut b = *b;
+    b.publish_ns = afs::rt::monotonic_ns();
+    if publ.send_copy(b).is_ok() {
+        *sent += 1;
+    }
 }
 
 fn main() -> ExitCode {

@@ -13,7 +13,7 @@
 //! estimation); the servo's wake latency in a run with the link and in a run of the plain stack
 //! (estimator local) just before it.
 
-use super::stack::{StackRun, run_stack_from};
+use super::stack::{StackRun, run_stack};
 use super::{BenchOptions, Series, finish_part};
 use crate::hist;
 use crate::ipc;
@@ -119,7 +119,7 @@ pub fn link(opts: &BenchOptions, stop: &AtomicBool) -> Result<LinkPart> {
             break;
         }
         ipc::claim_prefix(&a)?;
-        let (without, _) = run_stack_from(DEFAULT_STACK, &a, half, &opts.out, &[], stop, |_| ())?;
+        let (without, _) = run_stack(DEFAULT_STACK, &a, half, &opts.out, &[], stop, |_| ())?;
         let _ = wake_without.add(&without.wake);
         runs_without.push(without.report.passed);
         if stop.load(Ordering::Relaxed) {
@@ -240,10 +240,9 @@ fn linked_run(
     quiet(&mut lk);
     let link_b = Board(lk.spawn().context("starting host B's link board")?);
     let stack_a = TWO_HOSTS_STACK.replace("tcp/127.0.0.1:7447", &format!("tcp/127.0.0.1:{port_a}"));
-    let (with, measured) =
-        run_stack_from(&stack_a, a, duration_s, &opts.out, &[], stop, |running| {
-            measure(a, b, running)
-        })?;
+    let (with, measured) = run_stack(&stack_a, a, duration_s, &opts.out, &[], stop, |running| {
+        measure(a, b, running)
+    })?;
     let measured = measured?;
     drop(estimator);
     drop(link_b);

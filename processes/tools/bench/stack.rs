@@ -93,21 +93,9 @@ pub(super) struct StackRun {
     pub(super) age: Histogram<u64>,
 }
 
-/// Runs a stack (`afs run` refuses a prefix in use) while `during` runs beside it; `during`
-/// is told through its flag when the stack has ended.
-fn run_stack<T: Send>(
-    prefix: &str,
-    duration_s: f64,
-    dir: &Path,
-    extra: &[String],
-    stop: &AtomicBool,
-    during: impl FnOnce(&AtomicBool) -> T + Send,
-) -> Result<(StackRun, T)> {
-    run_stack_from(DEFAULT_STACK, prefix, duration_s, dir, extra, stop, during)
-}
-
-/// [`run_stack`] with the graph of the stack file `text`.
-pub(super) fn run_stack_from<T: Send>(
+/// Runs the stack of the stack file `text` (`afs run` refuses a prefix in use) while `during`
+/// runs beside it; `during` is told through its flag when the stack has ended.
+pub(super) fn run_stack<T: Send>(
     text: &str,
     prefix: &str,
     duration_s: f64,
@@ -271,9 +259,15 @@ pub(super) fn jitter(opts: &BenchOptions, stop: &AtomicBool) -> Result<LoopPart>
     let prefix = format!("{}l", opts.prefix);
     let dir = scratch(&prefix)?;
     let (cpu, prio) = servo_spec()?;
-    let (run, bare) = run_stack(&prefix, opts.duration_s, &dir, &[], stop, |running| {
-        bare_loop(&prefix, cpu, prio, opts.duration_s, running)
-    })?;
+    let (run, bare) = run_stack(
+        DEFAULT_STACK,
+        &prefix,
+        opts.duration_s,
+        &dir,
+        &[],
+        stop,
+        |running| bare_loop(&prefix, cpu, prio, opts.duration_s, running),
+    )?;
     let _ = std::fs::remove_dir_all(&dir);
     let bare = bare.context("the bare loop")?;
     let series = vec![
@@ -418,6 +412,7 @@ pub(super) fn stack(opts: &BenchOptions, stop: &AtomicBool) -> Result<StackPart>
             Vec::new()
         };
         let (r, seen) = run_stack(
+            DEFAULT_STACK,
             &prefix,
             opts.duration_s / 2.0,
             &dir,
