@@ -353,7 +353,8 @@ fn servo_killed_or_frozen_resumes_the_world_and_its_controller() {
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
 }
 
-/// 50 random SIGKILLs of servo, sensor and estimator over 2 simulated minutes: every fault
+/// 50 random SIGKILLs of servo, sensor and estimator in one simulated minute (the README's
+/// soak spreads them over two; here they come twice as densely, in half the CI time): every fault
 /// recovered, the world resumed each time (every tick once, none lost or reordered, at most
 /// one servo sample lost per servo kill), no file of a dead process left in /dev/shm, the
 /// supervisor's heap and the boards' memory flat, and nothing left at the end.
@@ -367,7 +368,7 @@ fn soak_fifty_random_kills() {
             "--scenario",
             "surface-tracking",
             "--duration",
-            "120",
+            "60",
             "--kills",
             "50",
             "--seed",
@@ -385,7 +386,7 @@ fn soak_fifty_random_kills() {
     let s = &r.samples;
     assert_eq!(
         (s.plant_received, s.plant_lost, s.reordered),
-        (1_200_001, 0, 0),
+        (600_001, 0, 0),
         "{s:?}"
     );
     let servo_kills = faults_of(&r, "kill-servo").len() as u64;
