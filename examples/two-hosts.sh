@@ -113,6 +113,14 @@ on_b "$bin/afs" record --prefix "$prefix" --out "$work/b.mcap" --json \
     >"$work/b-record.json" 2>"$work/b-record.log" &
 record_pid=$!
 pids+=("$record_pid")
+# An operator's look at the stack from host B, half-way through the run: `afs status`, then
+# the Python client of the servo's stream (5 000 ticks).
+python_client="$(cd "$(dirname "$0")" && pwd)/python/servo_subscriber.py"
+( sleep "$(python3 -c "print(float('$duration') / 2)")"
+  ( on_b "$bin/afs" status --prefix "$prefix" --json >"$work/b-status.json" 2>"$work/b-status.log" ) || true
+  on_b python3 "$python_client" --prefix "$prefix" --count 5000 --timeout 5 --json \
+      >"$work/b-python.json" 2>"$work/b-python.log" ) &
+status_pid=$!
 
 # Host A: the stack file with the link board on host A's address.
 sed "s#tcp/127.0.0.1:7447#tcp/$a_ip:$port#" "$(dirname "$0")/stack-two-hosts.toml" >"$work/host-a.toml"
@@ -134,6 +142,7 @@ set +e
 run_status=$?
 set -e
 
+wait "$status_pid" 2>/dev/null || true
 # Host B's observer leaves when host A's supervisor says it stops; then its boards.
 for _ in $(seq 200); do kill -0 "$record_pid" 2>/dev/null || break; sleep 0.05; done
 for p in "${pids[@]}"; do
@@ -159,6 +168,7 @@ def load(name):
     except Exception as e:
         return {"error": f"{name}: {e}"}
 a, rec, link = load("a-run.json"), load("b-record.json"), load("b-link.json")
+status, python = load("b-status.json"), load("b-python.json")
 procs = {p.get("name"): p for p in a.get("processes", [])} if "processes" in a else {}
 servo = rec.get("servo", {})
 faults = (a.get("chaos") or {}).get("faults", [])
@@ -181,6 +191,16 @@ out = {
         "servo_gaps": servo.get("first_gaps"),
         "link": link,
         "leftover_files": leftover.split(),
+        # `afs status` on host B: host A's processes as its supervisor reports them, and the
+        # servo loop's statistics, both mirrored by the link.
+        "status": {
+            "error": status.get("error"),
+            "processes": {p.get("name"): p.get("state") for p in (status.get("processes") or [])},
+            "loop_stats": status.get("loop") is not None,
+            "scenario": (status.get("supervisor") or {}).get("scenario"),
+        },
+        # The Python client of the servo's stream on host B (examples/python).
+        "python": python,
     },
     "chaos": {
         "faults": [{k: f.get(k) for k in ("kind", "injected_at_s", "back_ms", "note")} for f in faults],

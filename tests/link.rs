@@ -43,7 +43,8 @@ fn two_hosts(prefix: &str, args: &[&str]) -> (i32, Value) {
 /// Surface tracking with the estimator on host B: the run passes and agrees with the lockstep
 /// reference, the tangent estimates came from host B through the request and response topics,
 /// and host B's recording holds the servo stream to its last tick with no number missing,
-/// every batch accounted for; host B's shared memory is left empty.
+/// every batch accounted for; `afs status` and the Python client work on host B; host B's
+/// shared memory is left empty.
 #[test]
 fn the_estimator_on_another_host_serves_the_servo_and_the_record_has_no_gap() {
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
@@ -73,6 +74,19 @@ fn the_estimator_on_another_host_serves_the_servo_and_the_record_has_no_gap() {
     );
     assert!(v["host_b"]["recording"]["messages"]["/supervisor"].as_u64() > Some(0));
     assert!(v["host_b"]["recording"]["messages"]["/loop_stats"].as_u64() > Some(0));
+    // Observers on host B half-way through: `afs status` shows host A's processes and servo
+    // loop as its supervisor reports them; the Python client reads the servo's stream.
+    let st = &v["host_b"]["status"];
+    assert!(st["error"].is_null(), "{st}");
+    for board in ["servo", "sensor", "link"] {
+        assert_eq!(st["processes"][board], "running", "{st}");
+    }
+    assert_eq!(st["loop_stats"], true, "{st}");
+    let py = &v["host_b"]["python"];
+    assert_eq!(py["received"], 5000, "{py}");
+    assert_eq!(py["versions_ok"], true, "{py}");
+    assert_eq!(py["seq_increasing"], true, "{py}");
+    assert_eq!(py["finite"], true, "{py}");
     assert_eq!(v["host_b"]["leftover_files"], Value::Array(vec![]));
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
 }

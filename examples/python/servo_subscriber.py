@@ -1,0 +1,134 @@
+"""Subscribes to a running afs stack's controller stream (the servo's state) from Python.
+
+The payload is decoded with the byte layout of docs/messages.md (``ServoSample``, 216 bytes).
+The stream crosses the link board (docs/link.md), so this works the same on the controller's
+host and on a remote host that its link board reaches.
+
+    python3 examples/python/servo_subscriber.py --prefix demo --count 2000 --json
+
+It reports the samples' numbers as it got them: every missing number counted (a link cut, or
+this client falling behind the 10-kHz stream), never hidden.
+"""
+
+import argparse
+import ctypes
+import json
+import math
+import sys
+import time
+
+import iceoryx2 as iox2
+
+
+class ServoSample(ctypes.Structure):
+    """``afs::ServoSample``: the controller's state of one servo tick (docs/messages.md)."""
+
+    _fields_ = [
+        ("version", ctypes.c_uint32),
+        ("mode", ctypes.c_uint32),
+        ("flags", ctypes.c_uint32),
+        ("safe_reason", ctypes.c_uint32),
+        ("seq", ctypes.c_uint64),
+        ("tick_ns", ctypes.c_uint64),
+        ("wrench_seq", ctypes.c_uint64),
+        ("wrench_sample_ns", ctypes.c_uint64),
+        ("force_age_ns", ctypes.c_uint64),
+        ("publish_ns", ctypes.c_uint64),
+        ("time_s", ctypes.c_double),
+        ("normal_force_n", ctypes.c_double),
+        ("tangential_force_n", ctypes.c_double),
+        ("friction_normalized_n", ctypes.c_double),
+        ("a_omega_m_per_s", ctypes.c_double),
+        ("dither_amplitude_m", ctypes.c_double),
+        ("dither_phase_rad", ctypes.c_double),
+        ("nominal_velocity_m_per_s", ctypes.c_double),
+        ("velocity_target_m_per_s", ctypes.c_double),
+        ("tangent_velocity_m_per_s", ctypes.c_double),
+        ("tangent_angle_rad", ctypes.c_double),
+        ("set_point_m", ctypes.c_double * 2),
+        ("torque_nm", ctypes.c_double * 2),
+        ("estimations_started", ctypes.c_uint32),
+        ("estimates", ctypes.c_uint32),
+        ("reprobes", ctypes.c_uint32),
+        ("failures", ctypes.c_uint32),
+        ("aborted", ctypes.c_uint32),
+        ("safe_entries", ctypes.c_uint32),
+        ("estimations_requested", ctypes.c_uint32),
+        ("reserved", ctypes.c_uint32),
+    ]
+
+    @staticmethod
+    def type_name() -> str:
+        """The iceoryx2 type name the Rust side registers."""
+        return "afs::ServoSample"
+
+
+assert ctypes.sizeof(ServoSample) == 216, "layout differs from docs/messages.md"
+
+LAYOUT_VERSION = 1
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--prefix", default="afs", help="the stack's prefix")
+    parser.add_argument("--count", type=int, default=1000, help="samples to receive")
+    parser.add_argument("--timeout", type=float, default=20.0, help="seconds to wait")
+    parser.add_argument("--json", action="store_true", help="print a JSON summary")
+    args = parser.parse_args()
+
+    iox2.set_log_level_from_env_or(iox2.LogLevel.Warn)
+    config = iox2.config.global_config()
+    # The stack isolates its shared memory with this file-name prefix.
+    config.global_cfg.prefix = iox2.FileName.new(f"afs_{args.prefix}_")
+    node = iox2.NodeBuilder.new().config(config).create(iox2.ServiceType.Ipc)
+    deadline = time.monotonic() + args.timeout
+    service = None
+    while service is None:
+        try:
+            service = (
+                node.service_builder(iox2.ServiceName.new("afs/servo/state"))
+                .publish_subscribe(ServoSample)
+                .open()
+            )
+        except Exception as e:  # the stack (or the link) may still be starting
+            if time.monotonic() > deadline:
+                print(f"no afs stack with prefix '{args.prefix}': {e}", file=sys.stderr)
+                return 2
+            time.sleep(0.1)
+    # One second of ticks: the stream comes in bursts of 50 across a link, and Python is slow.
+    subscriber = service.subscriber_builder().buffer_size(10_000).create()
+
+    seqs, normal, versions_ok, finite = [], [], True, True
+    while len(seqs) < args.count and time.monotonic() < deadline:
+        sample = subscriber.receive()
+        if sample is None:
+            time.sleep(0.0005)
+            continue
+        s = sample.payload().contents
+        seqs.append(s.seq)
+        normal.append(s.normal_force_n)
+        versions_ok = versions_ok and s.version == LAYOUT_VERSION
+        finite = finite and math.isfinite(s.normal_force_n) and math.isfinite(s.time_s)
+        if not args.json and len(seqs) % 100 == 0:
+            print(f"tick {s.seq:8d}  t {s.time_s:7.3f} s  mode {s.mode}  "
+                  f"normal force {s.normal_force_n:+8.3f} N  estimates {s.estimates}")
+
+    steps = [b - a for a, b in zip(seqs, seqs[1:])]
+    summary = {
+        "received": len(seqs),
+        "versions_ok": versions_ok,
+        "finite": finite,
+        "seq_increasing": all(d > 0 for d in steps),
+        "first": seqs[0] if seqs else None,
+        "last": seqs[-1] if seqs else None,
+        "missing": sum(d - 1 for d in steps if d > 1),
+        "gaps": sum(1 for d in steps if d > 1),
+        "mean_normal_force_n": sum(normal) / len(normal) if normal else None,
+    }
+    if args.json:
+        print(json.dumps(summary))
+    return 0 if len(seqs) >= args.count else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
