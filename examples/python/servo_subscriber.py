@@ -17,7 +17,7 @@ import math
 import sys
 import time
 
-import iceoryx2 as iox2
+from afs_client import subscribe
 
 
 class ServoSample(ctypes.Structure):
@@ -76,27 +76,12 @@ def main() -> int:
     parser.add_argument("--json", action="store_true", help="print a JSON summary")
     args = parser.parse_args()
 
-    iox2.set_log_level_from_env_or(iox2.LogLevel.Warn)
-    config = iox2.config.global_config()
-    # The stack isolates its shared memory with this file-name prefix.
-    config.global_cfg.prefix = iox2.FileName.new(f"afs_{args.prefix}_")
-    node = iox2.NodeBuilder.new().config(config).create(iox2.ServiceType.Ipc)
     deadline = time.monotonic() + args.timeout
-    service = None
-    while service is None:
-        try:
-            service = (
-                node.service_builder(iox2.ServiceName.new("afs/servo/state"))
-                .publish_subscribe(ServoSample)
-                .open()
-            )
-        except Exception as e:  # the stack (or the link) may still be starting
-            if time.monotonic() > deadline:
-                print(f"no afs stack with prefix '{args.prefix}': {e}", file=sys.stderr)
-                return 2
-            time.sleep(0.1)
     # One second of ticks: the stream comes in bursts of 50 across a link, and Python is slow.
-    subscriber = service.subscriber_builder().buffer_size(10_000).create()
+    opened = subscribe(args.prefix, "afs/servo/state", ServoSample, deadline, buffer_size=10_000)
+    if opened is None:
+        return 2
+    _node, subscriber = opened
 
     seqs, normal, versions_ok, finite = [], [], True, True
     while len(seqs) < args.count and time.monotonic() < deadline:
