@@ -267,12 +267,13 @@ impl Injector {
         // servo's) as soon as iceoryx2 has cleaned them, not at the next burst.
         let _ = self.publisher.update_connections();
         let view = |b: Board| boards[b as usize];
-        let ready = |b: Board| {
-            let v = view(b);
+        // Running, and its data flowing for MIN_UPTIME.
+        let up = |v: BoardView| {
             v.pid != 0
                 && v.data_since
                     .is_some_and(|t| now.duration_since(t) >= MIN_UPTIME)
         };
+        let ready = |b: Board| up(view(b));
         let mode = servo.mode;
         let mut out = Vec::new();
         let phase = std::mem::replace(&mut self.phase, Phase::Idle);
@@ -281,13 +282,9 @@ impl Injector {
                 let Some(f) = self.plan.get(self.next).copied() else {
                     return out;
                 };
-                let link_up = link.pid != 0
-                    && link
-                        .data_since
-                        .is_some_and(|t| now.duration_since(t) >= MIN_UPTIME);
                 if sim_s < f.at_s
                     || f.kind.target().is_some_and(|b| !ready(b))
-                    || (f.kind.needs_link() && !link_up)
+                    || (f.kind.needs_link() && !up(link))
                 {
                     return out;
                 }
