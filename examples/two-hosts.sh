@@ -47,7 +47,7 @@ while [ $# -gt 0 ]; do
 done
 [ "$(id -u)" -eq 0 ] || die "run as root: host B is a network and mount namespace"
 for b in afs afs-servo afs-sensor afs-estimator afs-link; do
-    [ -x "$bin/$b" ] || die "$bin/$b is missing: build with \`cargo build --release --features link\`"
+    [ -x "$bin/$b" ] || die "$bin/$b is missing: build with \`cargo build --release --workspace\`"
 done
 for t in ip unshare nsenter python3; do
     command -v "$t" >/dev/null || die "'$t' is needed"
@@ -178,7 +178,7 @@ out = {
         "exit_status": int(run_status),
         "passed": a.get("passed"),
         "scenario": a.get("scenario"),
-        "failed_checks": [c.get("name") for c in a.get("checks", []) if not c.get("pass")],
+        "failed_checks": [c.get("id") for c in a.get("checks", []) if not c.get("pass")],
         "estimates": a.get("stack", {}).get("tracking", {}).get("estimations", {}).get("estimates"),
         "agreement": a.get("agreement"),
         "link_board_restarts": procs.get("link", {}).get("restarts"),
@@ -230,7 +230,7 @@ if chaos:
     out["chaos"]["gaps"] = len(gaps)
     out["chaos"]["gaps_inside"] = all(inside(g) for g in gaps)
     out["chaos"]["link_epochs"] = (link.get("unpacked") or {}).get("epochs")
-    ok_run = set(failed) <= {"figures within tolerance of the lockstep reference"} \
+    ok_run = set(failed) <= {"lockstep_agreement"} \
         and len(faults) == int((a.get("chaos") or {}).get("planned", -1)) \
         and procs.get("link", {}).get("restarts") == kills
     ok_gaps = out["chaos"]["gaps_inside"] and servo.get("gaps", 0) == len(gaps) \

@@ -104,7 +104,7 @@ fn bench_all_reports_every_series() {
         s.part
             .targets
             .iter()
-            .any(|t| t.name.contains("with a Foxglove client"))
+            .any(|t| t.id == "servo_wake_p99_with_viewer_over_without")
     );
     for p in ["h", "l", "s0", "s1", "s2", "s3", "s4", "s5"] {
         let left = afs::ipc::leftovers(&format!("{prefix}{p}"));

@@ -183,6 +183,8 @@ fn a_lossy_device_is_counted_and_never_feeds_the_servo_old_data() {
 #[test]
 fn a_bad_status_or_a_silent_device_puts_the_servo_in_its_safe_state() {
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let device = std::env::temp_dir().join(format!("afs-test-{}-netft.json", std::process::id()));
+    let device_arg = device.display().to_string();
     let stack = stack_file(
         "silent",
         port(2),
@@ -193,6 +195,8 @@ fn a_bad_status_or_a_silent_device_puts_the_servo_in_its_safe_state() {
             "0.5",
             "--silent-at-s",
             "4.6",
+            "--summary",
+            &device_arg,
         ],
     );
     let p = prefix("rdtsilent");
@@ -200,8 +204,17 @@ fn a_bad_status_or_a_silent_device_puts_the_servo_in_its_safe_state() {
     let (_, r) = run_rdt(&p, &stack, &["--duration", "5"]);
     let s = r.sensor.expect("the sensor board's statistics");
     let d = s.rdt.expect("an RDT source");
-    // 0.5 s at 7 kHz.
-    assert!((3000..=4000).contains(&d.status_errors), "{d:?}");
+    // Every record the device sent with an error status is counted as one, or lost on the
+    // way; none is counted that the device did not send.
+    let sent: afs::boards::netft::NetftSummary =
+        serde_json::from_str(&std::fs::read_to_string(&device).expect("the device's summary"))
+            .unwrap();
+    assert!(sent.error_records > 0, "{sent:?}");
+    assert!(d.status_errors <= sent.error_records, "{d:?} {sent:?}");
+    assert!(
+        sent.error_records - d.status_errors <= d.lost,
+        "error records neither counted nor lost: {d:?} {sent:?}"
+    );
     assert_eq!(d.last_status, afs_shared::rdt::STATUS_ERROR);
     assert!(!d.streaming && d.requests >= 2, "{d:?}");
     assert_eq!(s.published + d.status_errors + d.late, d.records, "{s:?}");
@@ -215,6 +228,7 @@ fn a_bad_status_or_a_silent_device_puts_the_servo_in_its_safe_state() {
     assert_eq!(process(&r, "sensor").restarts, 0);
     assert!(leftovers(&p).is_empty());
     let _ = std::fs::remove_file(stack);
+    let _ = std::fs::remove_file(device);
 }
 
 /// The sensor board killed twice mid-stream (it never says stop): each successor asks from the
@@ -270,8 +284,8 @@ fn sensor_cli(p: &str, address: &str, args: &[&str]) -> Command {
     c
 }
 
-/// `afs sensor` against the emulator losing 2 % of its datagrams: about 7 kHz, the loss
-/// counted, the samples recorded; a second client is refused while the first streams; a
+/// `afs sensor` against the emulator losing 2 % of its datagrams: every record published or
+/// counted late, the loss counted, the samples recorded; a second client is refused while the first streams; a
 /// closed port and a port that answers with something else are each named.
 #[test]
 fn afs_sensor_streams_a_device_and_names_what_is_wrong() {
@@ -293,10 +307,9 @@ fn afs_sensor_streams_a_device_and_names_what_is_wrong() {
         String::from_utf8_lossy(&out.stderr)
     );
     let r: SensorToolReport = report_of(&out);
-    // The device's rate from what arrived; records the VM delayed past the lateness limit
-    // are counted late and not published, so the published rate alone depends on stalls.
-    let arrived_hz = r.rdt.records as f64 / r.duration_s;
-    assert!((6000.0..7500.0).contains(&arrived_hz), "{r:?}");
+    // Every record that arrived is published or counted late (the rate is reported, not
+    // judged here: it is the machine's).
+    assert!(r.rdt.records > 0, "{r:?}");
     assert_eq!(r.published + r.rdt.late, r.rdt.records, "{r:?}");
     assert!((0.01..0.035).contains(&r.loss_fraction), "{r:?}");
     let recorded = r.record.as_ref().expect("a recording");

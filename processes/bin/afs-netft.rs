@@ -74,6 +74,10 @@ struct Cli {
     /// Seed of the faults.
     #[arg(long, default_value_t = 1)]
     fault_seed: u64,
+    /// Write what the device did (samples, datagrams, records, records with an error status)
+    /// to this file as JSON when it stops.
+    #[arg(long)]
+    summary: Option<std::path::PathBuf>,
 }
 
 fn main() -> ExitCode {
@@ -127,6 +131,14 @@ fn main() -> ExitCode {
     })();
     match result {
         Ok(s) => {
+            if let Some(path) = &cli.summary
+                && let Err(e) = serde_json::to_string(&s)
+                    .map_err(std::io::Error::other)
+                    .and_then(|text| std::fs::write(path, text))
+            {
+                eprintln!("afs-netft: error: writing {}: {e}", path.display());
+                return ExitCode::from(2);
+            }
             eprintln!(
                 "afs-netft: {} samples, {} datagrams sent, {} requests ({} ignored: another client's or not RDT)",
                 s.samples, s.datagrams, s.requests, s.ignored

@@ -57,6 +57,10 @@ struct RunArgs {
     /// Seed of the sensor noise (`afs chaos`: also of the fault plan).
     #[arg(long)]
     seed: Option<u64>,
+    /// Wall time the run may take (s) before the supervisor stops it and fails it (check
+    /// `reached_end`); default: the stack file's `wall_limit_s`, or 1.5 × the duration + 30 s.
+    #[arg(long, value_name = "S")]
+    wall_limit_s: Option<f64>,
     /// Record every topic to this MCAP file (Foxglove opens it).
     #[arg(long)]
     record: Option<PathBuf>,
@@ -95,6 +99,7 @@ fn run_stack(a: RunArgs, chaos: Option<supervisor::ChaosOptions>) -> Result<Exit
         duration: a.duration,
         prefix: a.prefix,
         seed: a.seed,
+        wall_limit_s: a.wall_limit_s,
         record: a.record,
         progress: !a.quiet,
         chaos,

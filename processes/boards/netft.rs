@@ -58,12 +58,17 @@ pub struct NetftArgs {
 }
 
 /// What the emulator did.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]
 pub struct NetftSummary {
     /// Internal samples taken.
     pub samples: u64,
     /// Datagrams sent.
     pub datagrams: u64,
+    /// Records the device streamed to its client (before the loss, duplication and reordering
+    /// of the impairments, and not while silent).
+    pub records: u64,
+    /// Of those, records with a non-zero status word (`--status-error-at-s`).
+    pub error_records: u64,
     /// Requests received (valid or not).
     pub requests: u64,
     /// Requests ignored: from another client while streaming, or not RDT.
@@ -175,6 +180,8 @@ fn serve(args: &NetftArgs, stop: &AtomicBool) -> Result<NetftSummary> {
         if let Some((to, recs)) = device.sample(counts, shaper.status(t_s))
             && !shaper.silent(t_s)
         {
+            summary.records += recs.len() as u64;
+            summary.error_records += recs.iter().filter(|r| r.status != 0).count() as u64;
             let len = recs.len() * RECORD_LEN;
             for (i, rec) in recs.iter().enumerate() {
                 out[i * RECORD_LEN..(i + 1) * RECORD_LEN].copy_from_slice(&rec.encode());

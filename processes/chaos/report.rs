@@ -149,6 +149,7 @@ impl ChaosReport {
     pub fn checks(&self, m: &Measured<'_>) -> Vec<Check> {
         let f = m.faults;
         let mut checks = vec![Check::at_least(
+            "faults_injected",
             "faults injected (of those planned)",
             self.injected as f64,
             self.planned as f64,
@@ -159,6 +160,7 @@ impl ChaosReport {
             .filter(|r| r.pid != 0 && r.back_ms.is_none() && !r.thawed)
             .count();
         checks.push(Check::at_most(
+            "boards_not_back",
             "faulted boards that did not come back",
             not_back as f64,
             0.0,
@@ -166,6 +168,7 @@ impl ChaosReport {
         if f.safe_entries > 0 {
             checks.push(
                 Check::at_most(
+                    "safe_after_last_good_ms",
                     "worst time from the last good force sample to the safe state (ms)",
                     f.safe_after_last_good_ms_max,
                     2.0,
@@ -175,6 +178,7 @@ impl ChaosReport {
         }
         checks.push(
             Check::at_most(
+                "normal_force_over_preload",
                 "largest true normal force / preload (outside 0.5 s after a servo restart)",
                 f.normal_force_max_over_preload,
                 2.0,
@@ -184,6 +188,7 @@ impl ChaosReport {
         if m.servo_restarted {
             checks.push(
                 Check::at_most(
+                    "normal_force_over_preload_after_servo_restart",
                     "largest true normal force / preload in the 0.5 s after a servo restart",
                     f.normal_force_max_after_servo_restart_n / m.preload_n,
                     1.5,
@@ -194,6 +199,7 @@ impl ChaosReport {
         if let Some(worst) = self.back_after_kill.sensor.max_ms {
             checks.push(
                 Check::at_most(
+                    "sensor_back_ms",
                     "worst time for a killed sensor's data to be back (ms)",
                     worst,
                     500.0,
@@ -204,6 +210,7 @@ impl ChaosReport {
         if let Some(worst) = self.back_beyond_backoff_ms_max {
             checks.push(
                 Check::at_most(
+                    "back_beyond_backoff_ms",
                     "worst time beyond the backoff for a killed board's data to be back (ms)",
                     worst,
                     300.0,
@@ -223,6 +230,7 @@ impl ChaosReport {
                 + diff(g.seq_repeat + g.seq_backwards, b.repeat + b.backwards)
                 + diff(g.future, b.future);
             checks.push(Check::at_most(
+                "bad_samples_uncounted",
                 "bad samples sent but not counted by the servo's gate",
                 miscount as f64,
                 0.0,
@@ -233,11 +241,13 @@ impl ChaosReport {
             &self.steady_after_last_fault,
         ) {
             checks.push(Check::at_most(
+                "stale_files_after_faults",
                 "iceoryx2 files of dead processes after the last fault",
                 after.stale_files.len() as f64,
                 0.0,
             ));
             checks.push(Check::at_most(
+                "supervisor_heap_growth_kib",
                 "supervisor heap growth over the faults (RssAnon, KiB)",
                 after.supervisor_rss_kib.anon as f64 - before.supervisor_rss_kib.anon as f64,
                 RSS_GROWTH_LIMIT_KIB,

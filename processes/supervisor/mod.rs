@@ -43,6 +43,7 @@ use anyhow::{Context, Result};
 use child::{Launch, Proc};
 use std::sync::atomic::AtomicBool;
 use watch::{Ports, Sinks, Supervisor};
+pub use watch::{RunEnd, default_wall_limit_s};
 
 /// How long observers of the stack (`afs view`, clients) get to close their nodes after the
 /// supervisor's Stopping status before the prefix is released and checked for leaks.
@@ -186,7 +187,12 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunReport> {
                 .link_cut()
                 .map(|(cut, restore)| LinkCut::new(cut, restore)),
         )
-        .with_progress(opts.progress);
+        .with_progress(opts.progress)
+        .with_wall_limit(std::time::Duration::from_secs_f64(
+            stack
+                .wall_limit_s
+                .unwrap_or_else(|| default_wall_limit_s(duration)),
+        ));
     let result = sup.run(stop);
     let wall_s = sup.shut_down();
     result?;
@@ -213,7 +219,8 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunReport> {
     let monitor = sup.monitor.clone();
     let faults = sup.faults.figures();
     let (stats, friction, sensor_stats) = (sup.stats, sup.friction, sup.sensor_stats);
-    let (finished, interrupted) = (sup.finished, sup.interrupted);
+    let end = sup.end.unwrap_or(RunEnd::Interrupted);
+    let (finished, interrupted) = (end == RunEnd::Finished, end == RunEnd::Interrupted);
     let samples = sup.joiner.counts(sup.wrench_received);
     drop(sup);
     drop((world, node));
@@ -235,8 +242,22 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunReport> {
     let agreement = scenario::compare(&stack_report, &reference);
 
     let mut checks = vec![
-        Check::at_least("servo ticks run", stack_report.ticks as f64, 1.0),
+        // A run the user did not stop must reach its end: one stopped by the wall-time limit or
+        // by a servo that gave up never ran the scenario through, whatever its figures say.
+        Check::at_least(
+            "reached_end",
+            format!("the scenario ran to its end (this run: {})", end.describe()),
+            f64::from(finished || interrupted),
+            1.0,
+        ),
+        Check::at_least(
+            "servo_ticks_run",
+            "servo ticks run",
+            stack_report.ticks as f64,
+            1.0,
+        ),
         Check::at_most(
+            "processes_gave_up",
             "processes that gave up (restart limit)",
             procs
                 .iter()
@@ -244,12 +265,18 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunReport> {
                 .count() as f64,
             0.0,
         ),
-        Check::at_most("iceoryx2 files of the prefix left", left.len() as f64, 0.0),
+        Check::at_most(
+            "prefix_files_left",
+            "iceoryx2 files of the prefix left",
+            left.len() as f64,
+            0.0,
+        ),
     ];
     // A restarted servo resumes the world and its controller, and the lockstep reference goes
     // through the same restarts at the same ticks (with the same probe runs started again).
     if finished {
         checks.push(Check::at_most(
+            "lockstep_agreement",
             "figures within tolerance of the lockstep reference",
             agreement.figures.iter().filter(|f| !f.agrees).count() as f64,
             0.0,
@@ -258,6 +285,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunReport> {
     match scenario.kind {
         ScenarioKind::SurfaceTracking | ScenarioKind::Corner => {
             checks.push(Check::at_most(
+                "ticks_without_contact",
                 "servo ticks without contact",
                 stack_report.tracking.ticks_without_contact as f64,
                 0.0,
@@ -269,6 +297,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunReport> {
                 && duration >= scenario.natural_duration_s
             {
                 checks.push(Check::at_most(
+                    "friction_end_over_start",
                     "mean friction at the end / before tuning",
                     f.end_ratio,
                     0.25,
@@ -280,6 +309,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunReport> {
                 let identified =
                     friction.is_some_and(|f| f.status.contains(FrictionStatus::MU_VALID));
                 checks.push(Check::at_least(
+                    "friction_identified",
                     "friction coefficient identified",
                     f64::from(identified),
                     1.0,
@@ -288,6 +318,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunReport> {
         }
     }
     checks.push(Check::at_most(
+        "non_finite_force_ticks",
         "servo ticks whose force values were not finite",
         faults.controller_non_finite as f64,
         0.0,
@@ -311,6 +342,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunReport> {
         duration_s: duration,
         finished,
         interrupted,
+        end,
         passed: RunReport::all_passed(&checks, interrupted),
         checks,
         stack: stack_report,

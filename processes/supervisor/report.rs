@@ -2,6 +2,7 @@
 //! checks, and its text summary.
 
 use super::child::{ExitRecord, Timeline};
+use super::watch::RunEnd;
 use crate::chaos::ChaosReport;
 pub use crate::hist::QuantilesUs;
 use crate::tools::record::RecordSummary;
@@ -306,6 +307,8 @@ pub struct RunReport {
     pub finished: bool,
     /// Stopped by Ctrl-C or SIGTERM.
     pub interrupted: bool,
+    /// Why the run ended.
+    pub end: RunEnd,
     /// Every check passed (and not interrupted).
     pub passed: bool,
     /// The checks.

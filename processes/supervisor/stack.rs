@@ -85,6 +85,10 @@ pub struct StackFile {
     pub duration_s: f64,
     /// Noise seed.
     pub seed: u64,
+    /// Wall time the run may take before the supervisor stops it, and fails it (s; default:
+    /// 1.5 × the duration + 30 s).
+    #[serde(default)]
+    pub wall_limit_s: Option<f64>,
     /// SimConfig overrides.
     #[serde(default)]
     pub sim: Option<toml::Table>,
@@ -139,6 +143,11 @@ impl StackFile {
                 "duration_s = {} must be a number of seconds in [0, 86400] (0: the scenario's own length)",
                 self.duration_s
             );
+        }
+        if let Some(w) = self.wall_limit_s
+            && !(w.is_finite() && (0.1..=1e6).contains(&w))
+        {
+            bail!("wall_limit_s = {w} must be a number of seconds in [0.1, 1000000]");
         }
         if self.process.is_empty() || self.process.len() > msg::MAX_PROCESSES {
             bail!(
@@ -236,6 +245,8 @@ pub struct RunOptions {
     pub prefix: Option<String>,
     /// Override.
     pub seed: Option<u64>,
+    /// Override of the wall-time limit (s).
+    pub wall_limit_s: Option<f64>,
     /// Record every topic to this MCAP file.
     pub record: Option<PathBuf>,
     /// Print a progress line every second on stderr.
@@ -280,6 +291,9 @@ pub fn load_stack(opts: &RunOptions) -> Result<StackFile> {
     }
     if let Some(x) = opts.seed {
         s.seed = x;
+    }
+    if let Some(x) = opts.wall_limit_s {
+        s.wall_limit_s = Some(x);
     }
     s.check()?;
     Ok(s)

@@ -23,6 +23,7 @@ use iceoryx2::node::Node;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
+use serde::{Deserialize, Serialize};
 use std::io::IsTerminal;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -114,6 +115,38 @@ impl Sinks {
     }
 }
 
+/// Why a run ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RunEnd {
+    /// The servo ran the scenario to its end (or to the run's duration).
+    Finished,
+    /// Stopped by a signal (SIGINT, SIGTERM).
+    Interrupted,
+    /// The wall-time limit passed first.
+    WallLimit,
+    /// The servo gave up (its restart limit).
+    ServoGaveUp,
+}
+
+impl RunEnd {
+    /// In words, for the report's check.
+    pub fn describe(self) -> &'static str {
+        match self {
+            RunEnd::Finished => "ran to its end",
+            RunEnd::Interrupted => "interrupted by a signal",
+            RunEnd::WallLimit => "stopped by the wall-time limit",
+            RunEnd::ServoGaveUp => "stopped: the servo gave up",
+        }
+    }
+}
+
+/// The wall time a run of `duration` simulated seconds gets by default (s): the duration
+/// plus generous start-up and restart slack.
+pub fn default_wall_limit_s(duration: f64) -> f64 {
+    duration * 1.5 + 30.0
+}
+
 /// A running stack under watch.
 pub struct Supervisor<'a> {
     /// The processes of the graph.
@@ -141,10 +174,10 @@ pub struct Supervisor<'a> {
     pub sensor_stats: Option<SensorStats>,
     /// The estimator's newest friction report.
     pub friction: Option<FrictionReport>,
-    /// The servo ran the scenario to its end.
-    pub finished: bool,
-    /// Stopped by a signal.
-    pub interrupted: bool,
+    /// Why the run ended (None while it runs).
+    pub end: Option<RunEnd>,
+    /// Wall time the run may take before the supervisor stops it.
+    wall_limit: Duration,
     /// Force samples received.
     pub wrench_received: u64,
     progress: bool,
@@ -190,8 +223,8 @@ impl<'a> Supervisor<'a> {
             stats: None,
             sensor_stats: None,
             friction: None,
-            finished: false,
-            interrupted: false,
+            end: None,
+            wall_limit: Duration::from_secs_f64(default_wall_limit_s(duration)),
             wrench_received: 0,
             progress: false,
             t0: now,
@@ -205,6 +238,14 @@ impl<'a> Supervisor<'a> {
             servo_resumes_at: None,
             genuine: None,
             scenario_name: scenario.kind.name(),
+        }
+    }
+
+    /// Stops the run after `limit` of wall time (its report then fails `reached_end`).
+    pub fn with_wall_limit(self, limit: Duration) -> Self {
+        Self {
+            wall_limit: limit,
+            ..self
         }
     }
 
@@ -250,12 +291,11 @@ impl<'a> Supervisor<'a> {
             p.spawn(&self.launch, false)?;
         }
         let tty = std::io::stderr().is_terminal();
-        // The simulated duration plus generous start-up and restart slack.
-        let limit = Duration::from_secs_f64(self.duration * 1.5 + 30.0);
+        let limit = self.wall_limit;
         loop {
             std::thread::sleep(Duration::from_millis(5));
             if stop.load(Ordering::Relaxed) {
-                self.interrupted = true;
+                self.end = Some(RunEnd::Interrupted);
                 break;
             }
             self.poll_streams();
@@ -266,7 +306,7 @@ impl<'a> Supervisor<'a> {
             let _ = self.ports.command.update_connections();
             self.inject();
             if self.watch_children() {
-                self.finished = true;
+                self.end = Some(RunEnd::Finished);
                 break;
             }
             let servo_failed = self
@@ -274,13 +314,15 @@ impl<'a> Supervisor<'a> {
                 .iter()
                 .any(|p| p.board == Some(Board::Servo) && p.state == ProcessState::Failed);
             if servo_failed {
+                self.end = Some(RunEnd::ServoGaveUp);
                 break;
             }
             if self.t0.elapsed() > limit {
                 eprintln!(
-                    "afs: the scenario did not end within {:.0} s of wall time; stopping",
+                    "afs: the scenario did not end within {:.1} s of wall time (the wall-time limit); stopping",
                     limit.as_secs_f64()
                 );
+                self.end = Some(RunEnd::WallLimit);
                 break;
             }
             self.publish_status();

@@ -108,6 +108,9 @@ pub struct RecordSummary {
     pub messages: BTreeMap<String, u64>,
     /// Samples dropped because the writer fell behind.
     pub dropped: u64,
+    /// Samples offered to the recording: every one is written (`messages`) or dropped.
+    #[serde(default)]
+    pub offered: u64,
     /// File size (bytes).
     pub bytes: u64,
 }
@@ -116,6 +119,7 @@ pub struct RecordSummary {
 pub struct Recorder {
     tx: SyncSender<Rec>,
     dropped: u64,
+    offered: u64,
     handle: JoinHandle<Result<RecordSummary>>,
 }
 
@@ -136,12 +140,14 @@ impl Recorder {
         Ok(Self {
             tx,
             dropped: 0,
+            offered: 0,
             handle,
         })
     }
 
     /// Queues a sample; never blocks.
     pub fn push(&mut self, r: Rec) {
+        self.offered += 1;
         match self.tx.try_send(r) {
             Ok(()) => {}
             Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => self.dropped += 1,
@@ -156,6 +162,7 @@ impl Recorder {
             .join()
             .map_err(|_| anyhow::anyhow!("the recorder thread panicked"))??;
         s.dropped += self.dropped;
+        s.offered = self.offered;
         Ok(s)
     }
 }

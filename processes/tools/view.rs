@@ -80,6 +80,10 @@ pub struct ViewSummary {
     pub unwatched: u64,
     /// Samples dropped because the view's thread fell behind.
     pub dropped: u64,
+    /// Samples kept by the decimation and offered to the view: every one is published,
+    /// unwatched or dropped.
+    #[serde(default)]
+    pub offered: u64,
     /// Most clients connected at once (as seen every 1024 samples).
     pub max_clients: u64,
 }
@@ -146,6 +150,7 @@ impl Decimator {
 pub struct LiveView {
     tx: SyncSender<Rec>,
     dropped: u64,
+    offered: u64,
     decimator: Decimator,
     url: String,
     handle: JoinHandle<ViewSummary>,
@@ -194,6 +199,7 @@ impl LiveView {
         Ok(Self {
             tx,
             dropped: 0,
+            offered: 0,
             decimator: Decimator::new(settings.rate_hz, tick_hz),
             url,
             handle,
@@ -210,6 +216,7 @@ impl LiveView {
         if !self.decimator.keep(&r) {
             return;
         }
+        self.offered += 1;
         match self.tx.try_send(r) {
             Ok(()) => {}
             Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => self.dropped += 1,
@@ -221,6 +228,7 @@ impl LiveView {
         drop(self.tx);
         let mut s = self.handle.join().unwrap_or_default();
         s.dropped += self.dropped;
+        s.offered = self.offered;
         s
     }
 }

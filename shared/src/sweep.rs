@@ -10,6 +10,8 @@ use serde::{Deserialize, Serialize};
 /// One check over the seeds.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CheckSweep {
+    /// The check's stable identifier.
+    pub id: String,
     /// What is checked.
     pub name: String,
     /// How the figure must stand to the limit.
@@ -61,13 +63,13 @@ pub fn quantile(sorted: &[f64], q: f64) -> f64 {
     }
 }
 
-/// Every check named in `runs` (each a seed and its checks), in the order the first seed
+/// Every check (by identifier) in `runs` (each a seed and its checks), in the order the first seed
 /// lists them, summarised over the seeds.
 pub fn summarize(runs: &[(u64, Vec<Check>)]) -> Vec<CheckSweep> {
     let mut names: Vec<&Check> = Vec::new();
     for (_, checks) in runs {
         for c in checks {
-            if !names.iter().any(|n| n.name == c.name) {
+            if !names.iter().any(|n| n.id == c.id) {
                 names.push(c);
             }
         }
@@ -77,6 +79,7 @@ pub fn summarize(runs: &[(u64, Vec<Check>)]) -> Vec<CheckSweep> {
         .map(|first| {
             let mut values = Vec::new();
             let mut s = CheckSweep {
+                id: first.id.clone(),
                 name: first.name.clone(),
                 relation: first.relation,
                 limit: first.limit,
@@ -94,7 +97,7 @@ pub fn summarize(runs: &[(u64, Vec<Check>)]) -> Vec<CheckSweep> {
             let mut worst: Option<(f64, u64)> = None;
             let mut first_non_finite = None;
             for (seed, checks) in runs {
-                let Some(c) = checks.iter().find(|c| c.name == first.name) else {
+                let Some(c) = checks.iter().find(|c| c.id == first.id) else {
                     continue;
                 };
                 s.runs += 1;
@@ -152,7 +155,7 @@ pub fn figure(experiment: &str, runs: &[(u64, Vec<Check>)], sweeps: &[CheckSweep
             points: runs
                 .iter()
                 .filter_map(|(seed, checks)| {
-                    let c = checks.iter().find(|c| c.name == s.name)?;
+                    let c = checks.iter().find(|c| c.id == s.id)?;
                     let y = if s.limit != 0.0 {
                         c.value / s.limit
                     } else {
@@ -202,8 +205,8 @@ mod tests {
                 (
                     seed,
                     vec![
-                        Check::at_most("error", x * 1.05, 1.0),
-                        Check::at_least("margin", y - 0.25, 2.0),
+                        Check::at_most("error", "error", x * 1.05, 1.0),
+                        Check::at_least("margin", "margin", y - 0.25, 2.0),
                     ],
                 )
             })

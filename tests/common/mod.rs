@@ -12,8 +12,31 @@ use std::time::{Duration, Instant};
 /// Stack tests of one binary run one at a time.
 pub static SERIAL: Mutex<()> = Mutex::new(());
 
+/// The `afs` binary: cargo's own for the root package's tests; for another member's tests (the
+/// link board's), the one beside them in the target directory, which `--workspace` builds.
 pub fn afs() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_afs"))
+    Command::new(bin("afs"))
+}
+
+/// The path of the workspace binary `name`, in the directory above the running test's.
+pub fn bin(name: &str) -> PathBuf {
+    if name == "afs"
+        && let Some(p) = option_env!("CARGO_BIN_EXE_afs")
+    {
+        return PathBuf::from(p);
+    }
+    let test = std::env::current_exe().expect("the test's own path");
+    let dir = test
+        .parent()
+        .and_then(|deps| deps.parent())
+        .expect("the target directory");
+    let p = dir.join(name);
+    assert!(
+        p.exists(),
+        "{} is missing: build the workspace first (`cargo test --release --workspace` builds it)",
+        p.display()
+    );
+    p
 }
 
 /// A prefix no other test or run uses.
@@ -50,12 +73,10 @@ pub fn process<'a>(r: &'a RunReport, name: &str) -> &'a afs::supervisor::Process
         .unwrap_or_else(|| panic!("no process {name} in the report"))
 }
 
-/// The check named `name` of a run report.
-pub fn check<'a>(r: &'a RunReport, name: &str) -> &'a afs_shared::check::Check {
-    r.checks
-        .iter()
-        .find(|c| c.name == name)
-        .unwrap_or_else(|| panic!("no check '{name}' in {:#?}", r.checks))
+/// The check identified by `id` of a run report.
+pub fn check<'a>(r: &'a RunReport, id: &str) -> &'a afs_shared::check::Check {
+    afs_shared::check::find(&r.checks, id)
+        .unwrap_or_else(|| panic!("no check '{id}' in {:#?}", r.checks))
 }
 
 /// The failed checks of a run report, one line each.

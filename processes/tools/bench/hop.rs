@@ -207,36 +207,42 @@ pub(super) fn hop(opts: &BenchOptions, stop: &AtomicBool) -> Result<HopReport> {
             };
             let targets = vec![
                 Check::at_most(
+                    "afs_poll_over_atomic_oneway",
                     "afs busy-poll p50 / atomic floor p50, one way",
                     ratios.afs_poll_over_atomic_p50.oneway,
                     10.0,
                 )
                 .target(),
                 Check::at_most(
+                    "afs_poll_over_atomic_rtt",
                     "afs busy-poll p50 / atomic floor p50, round trip",
                     ratios.afs_poll_over_atomic_p50.rtt,
                     10.0,
                 )
                 .target(),
                 Check::at_least(
+                    "unix_socket_over_afs_poll_oneway",
                     "Unix socket p50 / afs busy-poll p50, one way",
                     ratios.unix_socket_over_afs_poll_p50.oneway,
                     10.0,
                 )
                 .target(),
                 Check::at_least(
+                    "unix_socket_over_afs_poll_rtt",
                     "Unix socket p50 / afs busy-poll p50, round trip",
                     ratios.unix_socket_over_afs_poll_p50.rtt,
                     10.0,
                 )
                 .target(),
                 Check::at_most(
+                    "afs_over_bare_iceoryx2_oneway",
                     "afs overhead over bare iceoryx2 at p50, one way",
                     ratios.afs_overhead_over_bare_iceoryx2_p50.oneway,
                     0.10,
                 )
                 .target(),
                 Check::at_most(
+                    "afs_over_bare_iceoryx2_rtt",
                     "afs overhead over bare iceoryx2 at p50, round trip",
                     ratios.afs_overhead_over_bare_iceoryx2_p50.rtt,
                     0.10,

@@ -100,7 +100,7 @@ fn free_port() -> Result<u16> {
 /// Runs the part.
 pub fn link(opts: &BenchOptions, stop: &AtomicBool) -> Result<LinkPart> {
     let link_bin = resolve_binary("afs-link").context(
-        "afs bench link needs the link board: build it with `cargo build --release --features link`",
+        "afs bench link needs the link board: build it with `cargo build --release --workspace`",
     )?;
     let est_bin = resolve_binary("afs-estimator")?;
     let a = format!("{}a", opts.prefix);
@@ -145,8 +145,15 @@ pub fn link(opts: &BenchOptions, stop: &AtomicBool) -> Result<LinkPart> {
     let p99 = |h: &hdrhistogram::Histogram<u64>| h.value_at_quantile(0.99) as f64;
     let wake_ratio = p99(&wake_with) / p99(&wake_without);
     let targets = vec![
-        Check::at_most("servo wake p99 with the link / without", wake_ratio, 1.1).target(),
         Check::at_most(
+            "servo_wake_p99_with_link_over_without",
+            "servo wake p99 with the link / without",
+            wake_ratio,
+            1.1,
+        )
+        .target(),
+        Check::at_most(
+            "servo_samples_missing_on_host_b",
             "servo samples missing on host B",
             measured.loss.servo_host_b.missing as f64,
             0.0,

@@ -286,8 +286,15 @@ pub(super) fn jitter(opts: &BenchOptions, stop: &AtomicBool) -> Result<LoopPart>
     ];
     let servo = QuantilesUs::of(&series[1].hist);
     let floor = QuantilesUs::of(&series[0].hist);
-    let targets =
-        vec![Check::at_most("servo wake p99 / bare loop p99", servo.p99 / floor.p99, 1.2).target()];
+    let targets = vec![
+        Check::at_most(
+            "servo_wake_p99_over_bare_loop",
+            "servo wake p99 / bare loop p99",
+            servo.p99 / floor.p99,
+            1.2,
+        )
+        .target(),
+    ];
     let part = finish_part(
         "loop",
         &series,
@@ -495,6 +502,7 @@ pub(super) fn stack(opts: &BenchOptions, stop: &AtomicBool) -> Result<StackPart>
     if let Some(s) = series.iter().find(|s| s.name == "force_age") {
         targets.push(
             Check::at_most(
+                "force_age_p99_us",
                 "force age p99 without hog (µs) ≤ sensor period + 20 µs",
                 QuantilesUs::of(&s.hist).p99,
                 sensor_period_us + 20.0,
@@ -511,6 +519,7 @@ pub(super) fn stack(opts: &BenchOptions, stop: &AtomicBool) -> Result<StackPart>
     if let (Some(with), Some(without)) = (p99("servo_wake_viewer"), p99("servo_wake")) {
         targets.push(
             Check::at_most(
+                "servo_wake_p99_with_viewer_over_without",
                 "servo wake p99 with a Foxglove client / without",
                 with / without,
                 1.1,

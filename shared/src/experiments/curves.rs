@@ -119,22 +119,30 @@ pub fn fig4_1(opts: &Options) -> Result<Outcome<Fig41Summary>, ExperimentError> 
     };
     let mut checks = vec![
         Check::at_most(
+            "static_slope_error",
             "|static slope / k_fric − 1| (eq. 4.1)",
             (slope / sigma0 - 1.0).abs(),
             0.01,
         ),
         Check::at_most(
+            "static_force_error",
             "|static force at the end / eq. 4.5 − 1|",
             (f / sliding - 1.0).abs(),
             0.01,
         ),
-        Check::at_most("components' sum − eq. 4.5 (N)", sum_gap, 1e-12),
+        Check::at_most(
+            "components_sum_error_n",
+            "components' sum − eq. 4.5 (N)",
+            sum_gap,
+            1e-12,
+        ),
     ];
     // Without a Stribeck term (F_s = 0) there is no curve to have an inflection.
     if law.stribeck_n > 0.0 {
         checks.insert(
             2,
             Check::at_most(
+                "stribeck_inflection_error",
                 "|Stribeck inflection / (ẋ_s/√3) − 1|",
                 (inflection / closed - 1.0).abs(),
                 0.005,
@@ -273,12 +281,14 @@ pub fn fig4_2(opts: &Options) -> Result<Outcome<Fig42Summary>, ExperimentError> 
     let mut checks = Vec::new();
     if let Some(v) = v_min {
         checks.push(Check::at_most(
+            "minimum_error",
             "|sampled minimum / closed-form minimum − 1|",
             (best_v / v - 1.0).abs(),
             0.005,
         ));
     }
     checks.push(Check::at_most(
+        "breakaway_force_error_n",
         "|eq. 4.5 at 0+ − (F_t + F_s)| (N)",
         (law.resistance(1e-12) - law.breakaway()).abs(),
         1e-9,
@@ -394,11 +404,13 @@ pub fn fig4_3(opts: &Options) -> Result<Outcome<Fig43Summary>, ExperimentError> 
         });
     }
     checks.push(Check::at_most(
+        "cycle_mean_quadrature_max_n",
         "largest |cycle mean| by quadrature (N), eq. 4.9",
         worst_mean,
         1e-9,
     ));
     checks.push(Check::at_most(
+        "sigma_closed_form_error_max",
         "largest |σ closed form − σ quadrature| / σ",
         worst_gap,
         1e-6,
@@ -554,16 +566,19 @@ pub fn fig4_4(opts: &Options) -> Result<Outcome<Fig44Summary>, ExperimentError> 
         .fold(0.0, f64::max);
     let checks = vec![
         Check::at_most(
+            "cycle_mean_closed_form_error_n",
             "largest |cycle mean, closed form − quadrature| (N)",
             closed_form_gap,
             1e-9,
         ),
         Check::at_most(
+            "model_error_outside_transition",
             "|measured − model| / undithered, ẋ_o/Aω outside [0.5, 1.5]",
             worst_outside,
             0.05,
         ),
         Check::at_most(
+            "model_error_in_transition",
             "|measured − model| / undithered, ẋ_o/Aω within [0.5, 1.5]",
             worst_inside,
             0.25,

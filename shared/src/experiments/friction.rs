@@ -206,11 +206,36 @@ pub fn friction_id(opts: &Options) -> Result<Outcome<FrictionIdSummary>, Experim
         ),
     ];
     let checks = vec![
-        Check::at_most("sensor re-zeroing failures", retare_failures as f64, 0.0),
-        Check::at_most("|F_t error| (fraction)", relative_error[0].abs(), 0.05),
-        Check::at_most("|F_v error| (fraction)", relative_error[1].abs(), 0.05),
-        Check::at_most("|F_s error| (fraction)", relative_error[2].abs(), 0.05),
-        Check::at_most("|x_s error| (fraction)", relative_error[3].abs(), 0.10),
+        Check::at_most(
+            "rezero_failures",
+            "sensor re-zeroing failures",
+            retare_failures as f64,
+            0.0,
+        ),
+        Check::at_most(
+            "kinetic_error",
+            "|F_t error| (fraction)",
+            relative_error[0].abs(),
+            0.05,
+        ),
+        Check::at_most(
+            "viscous_error",
+            "|F_v error| (fraction)",
+            relative_error[1].abs(),
+            0.05,
+        ),
+        Check::at_most(
+            "stribeck_error",
+            "|F_s error| (fraction)",
+            relative_error[2].abs(),
+            0.05,
+        ),
+        Check::at_most(
+            "stribeck_velocity_error",
+            "|x_s error| (fraction)",
+            relative_error[3].abs(),
+            0.10,
+        ),
     ];
     let curve = |law: FrictionLaw| -> Vec<[f64; 2]> {
         (0..200)
@@ -316,8 +341,14 @@ pub fn fig4_5(opts: &Options) -> Result<Outcome<Fig45Summary>, ExperimentError> 
     let mean_ratio = on.mean_force_n / off.mean_force_n;
     let gap = (on.mean_force_n - q_seen) / q_seen;
     let checks = vec![
-        Check::at_most("dithered / undithered mean friction", mean_ratio, 0.20),
         Check::at_most(
+            "dithered_over_undithered_friction",
+            "dithered / undithered mean friction",
+            mean_ratio,
+            0.20,
+        ),
+        Check::at_most(
+            "dithered_mean_over_quadrature_error",
             "|dithered mean − quadrature at seen velocity| / quadrature",
             gap.abs(),
             0.15,
@@ -444,9 +475,15 @@ pub fn fig4_6(opts: &Options) -> Result<Outcome<Fig46Summary>, ExperimentError> 
     let relative_error = true_mu.map(|m| (fit.mu - m) / m);
     let mut checks = Vec::new();
     if let Some(e) = relative_error {
-        checks.push(Check::at_most("|μ − true μ| / true μ", e.abs(), 0.03));
+        checks.push(Check::at_most(
+            "mu_error",
+            "|μ − true μ| / true μ",
+            e.abs(),
+            0.03,
+        ));
     } else {
         checks.push(Check::at_most(
+            "mu_error_to_thesis_table",
             "|μ − 0.709| (thesis table)",
             (fit.mu - 0.709).abs(),
             0.0005,
@@ -595,11 +632,13 @@ pub fn fig4_7(opts: &Options) -> Result<Outcome<Fig47Summary>, ExperimentError> 
     let model_growth = steps[6].model_std_n / steps[1].model_std_n;
     let mut checks = vec![
         Check::at_least(
+            "dithered_over_undithered_sigma_min",
             "smallest dithered σ / undithered σ",
             smallest_dithered / undithered,
             10.0,
         ),
         Check::at_most(
+            "sigma_model_error_max",
             "worst |σ measured − σ model| / σ model",
             worst_model_gap,
             0.25,
@@ -608,12 +647,15 @@ pub fn fig4_7(opts: &Options) -> Result<Outcome<Fig47Summary>, ExperimentError> 
     checks.push(match opts.rig {
         // afs's rig: the growth is the model's (friction reversal plus tool inertia).
         crate::setups::Rig::Afs => Check::at_most(
+            "sigma_growth_model_error",
             "|σ growth 1 → 6 mm − model growth|",
             (growth - model_growth).abs(),
             0.1,
         ),
         // The thesis's rig: the growth the thesis saw (it doubled over 5 mm).
-        crate::setups::Rig::Thesis => Check::at_least("σ growth 1 → 6 mm", growth, 1.5),
+        crate::setups::Rig::Thesis => {
+            Check::at_least("sigma_growth_1_to_6_mm", "σ growth 1 → 6 mm", growth, 1.5)
+        }
     });
     let mut mean_removed = Vec::new();
     for (i, s) in steps.iter().enumerate() {
@@ -807,16 +849,19 @@ pub fn fig4_8(opts: &Options) -> Result<Outcome<Fig48Summary>, ExperimentError> 
         let bound = sim.servo().tuner_context().a_max;
         let why = explain(name, &report, settled, rate, bound, v, &cfg);
         checks.push(Check::at_most(
+            format!("{name}_mean_at_5s_over_start"),
             format!("{name}: mean at 5 s / start"),
             at5 / start,
             0.25,
         ));
         checks.push(Check::at_most(
+            format!("{name}_normal_deviation_max"),
             format!("{name}: worst |F_N − preload|/preload after 0.5 s"),
             worst,
             0.10,
         ));
         checks.push(Check::at_least(
+            format!("{name}_normal_force_min_n"),
             format!("{name}: smallest normal force (N), contact kept"),
             min_normal,
             1e-6,
@@ -964,11 +1009,17 @@ pub fn fig4_9(opts: &Options) -> Result<Outcome<Fig49Summary>, ExperimentError> 
     let ratio = last.mean_force_n / before.mean_force_n;
     let checks = vec![
         Check::at_most(
+            "a_omega_crosses_nominal_velocity",
             "Aω crosses ẋ_o, seconds after tuning starts",
             crossing.map_or(f64::INFINITY, |t| t - run.tune_at),
             run.duration - run.tune_at - 2.0,
         ),
-        Check::at_most("mean friction over the last second / before", ratio, 0.15),
+        Check::at_most(
+            "last_second_over_before_friction",
+            "mean friction over the last second / before",
+            ratio,
+            0.15,
+        ),
     ];
     let three = sliding_periods(&run.ticks, 3);
     let v = run.nominal;
@@ -1066,11 +1117,13 @@ pub fn fig4_10(opts: &Options) -> Result<Outcome<Fig410Summary>, ExperimentError
         .fold(0.0, f64::max);
     let checks = vec![
         Check::at_least(
+            "sigma_last_second_over_before",
             "σ over the last second / σ before tuning",
             last.std_force_n / before.std_force_n,
             10.0,
         ),
         Check::at_most(
+            "normal_force_std_over_preload",
             "std of the normal force after tuning starts / preload",
             std_n / run.preload,
             0.05,

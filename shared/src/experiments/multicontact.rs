@@ -273,8 +273,13 @@ pub fn fig5_9(opts: &Options) -> Result<Outcome<Fig59Summary>, ExperimentError> 
         .fold(0.0, f64::max);
     let final_tilt = rig.plant.pose()[2].to_degrees();
     let checks = vec![
-        Check::at_most("largest rotation-centre error / box size", max_err, 0.01),
-        Check::at_most("final tilt (deg)", final_tilt.abs(), 1.0),
+        Check::at_most(
+            "rotation_centre_error_over_box_max",
+            "largest rotation-centre error / box size",
+            max_err,
+            0.01,
+        ),
+        Check::at_most("final_tilt_deg", "final tilt (deg)", final_tilt.abs(), 1.0),
     ];
     let figure = Figure {
         title: "fig5.9/5.10: rotating a box into a corner about its estimated rotation centre"

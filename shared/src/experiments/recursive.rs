@@ -244,18 +244,21 @@ pub fn rls(opts: &Options) -> Result<Outcome<RlsSummary>, ExperimentError> {
     let (batch, forgetting, drift) = (&runs[0], &runs[1], &runs[2]);
     let answers = runs.iter().map(|r| r.answers.len()).min().unwrap_or(0);
     let checks = vec![
-        Check::at_least("answers per run", answers as f64, 10.0),
+        Check::at_least("answers_per_run", "answers per run", answers as f64, 10.0),
         Check::at_most(
+            "batch_tracking_rms_error_deg",
             "servo on the batch estimate: tracking RMS error (deg)",
             batch.tracking_rms_error_deg,
             0.5,
         ),
         Check::at_most(
+            "drift_rls_tracking_rms_error_deg",
             "servo on the drift RLS: tracking RMS error (deg)",
             drift.tracking_rms_error_deg,
             0.5,
         ),
         Check::at_most(
+            "drift_rls_over_batch_rms_error",
             "drift RLS / batch, RMS error at the answers (run on the drift RLS)",
             drift.drift_rms_error_deg / drift.batch_rms_error_deg,
             1.0,

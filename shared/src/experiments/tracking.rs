@@ -242,21 +242,25 @@ pub fn tangent(opts: &Options) -> Result<Outcome<TangentSummary>, ExperimentErro
     }
     let checks = vec![
         Check::at_most(
+            "no_friction_error_max_deg",
             "no friction: max |error| for |α0| ≤ 10° (deg)",
             cases[0].max_error_within_10_deg,
             0.1,
         ),
         Check::at_most(
+            "dither_error_max_deg",
             "friction + dither: max |error| for |α0| ≤ 10° (deg)",
             cases[1].max_error_within_10_deg,
             0.5,
         ),
         Check::at_most(
+            "no_friction_wrong_answers",
             "no friction: accepted answers > 0.5° off, |α0| ≤ 15°",
             cases[0].wrong_answers as f64,
             0.0,
         ),
         Check::at_most(
+            "dither_wrong_answers",
             "friction + dither: accepted answers > 0.5° off, |α0| ≤ 15°",
             cases[1].wrong_answers as f64,
             0.0,
@@ -464,18 +468,30 @@ pub fn fig5_6(opts: &Options) -> Result<Outcome<Fig56Summary>, ExperimentError> 
     cfg.start_u_m = -0.5 * wl;
     let run = run_tracking(&cfg, v, 0.5 * wl, 5.0 * v, 400.0)?;
     let checks = vec![
-        Check::at_most("tangent error RMS (deg)", run.tangent_error_rms_deg, 1.0),
         Check::at_most(
+            "tangent_error_rms_deg",
+            "tangent error RMS (deg)",
+            run.tangent_error_rms_deg,
+            1.0,
+        ),
+        Check::at_most(
+            "normal_deviation_max",
             "worst |F_N − preload| / preload (dither-period mean)",
             run.worst_normal_deviation,
             0.2,
         ),
         Check::at_most(
+            "ticks_without_contact",
             "servo ticks without contact",
             run.ticks_without_contact as f64,
             0.0,
         ),
-        Check::at_least("distance tracked (m)", run.travelled_m, 0.99 * wl),
+        Check::at_least(
+            "distance_tracked_m",
+            "distance tracked (m)",
+            run.travelled_m,
+            0.99 * wl,
+        ),
     ];
     let figure = tracking_figure(
         format!(
@@ -623,16 +639,19 @@ pub fn corners(opts: &Options) -> Result<Outcome<CornersSummary>, ExperimentErro
         .fold(0.0, f64::max);
     let checks = vec![
         Check::at_least(
+            "corners_tracked",
             "corners detected and tracked through",
             tracked as f64,
             reports.len() as f64,
         ),
         Check::at_most(
+            "ticks_without_contact",
             "servo ticks without contact",
             run.ticks_without_contact as f64,
             0.0,
         ),
         Check::at_least(
+            "distance_tracked_m",
             "distance tracked (m)",
             run.travelled_m,
             0.99 * (end - cfg.start_u_m),
@@ -811,11 +830,13 @@ pub fn fig5_3(opts: &Options) -> Result<Outcome<Fig53Summary>, ExperimentError> 
     let dither = run_tracking(&cfg, v, end, 5.0 * v, 600.0)?;
     let checks = vec![
         Check::at_most(
+            "dither_over_preliminary_tangent_error",
             "dither method: tangent error RMS / preliminary's",
             dither.tangent_error_rms_deg / preliminary.tangent_error_rms_deg,
             1.0,
         ),
         Check::at_most(
+            "dither_over_preliminary_force_deviation",
             "dither method: RMS period-mean force deviation / preliminary's",
             dither.normal_deviation_rms / preliminary.normal_deviation_rms.max(1e-9),
             1.0,
