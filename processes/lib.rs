@@ -5,8 +5,9 @@
 //! | folder | job |
 //! |---|---|
 //! | `boards/` | the board processes' loops: servo, sensor, estimator, and what they share |
-//! | `supervisor/` | `afs run` and `afs status`: stack file, children, restart policy, joining, footprint, report |
-//! | `chaos/` | `afs chaos`: the fault plan's spans and the injector |
+//! | `supervisor/` | `afs run` and `afs status`: children, restart policy, the watch loop, footprint, report |
+//! | `chaos/` | `afs chaos`: the fault plan's spans, the injector, the bad samples, the report |
+//! | `stack/` | the stack file and its types, a restart's timeline, a stack's footprint: below both the supervisor and chaos |
 //! | `tools/` | `afs bench`, `afs experiment`, recording, plots and export |
 //! | `ipc`, `rt`, `hist`, `procfs` | iceoryx2 services, real-time set-up, latency histograms, `/proc` |
 
@@ -16,5 +17,6 @@ pub mod hist;
 pub mod ipc;
 pub mod procfs;
 pub mod rt;
+pub mod stack;
 pub mod supervisor;
 pub mod tools;

@@ -18,6 +18,18 @@ pub fn monotonic_ns() -> u64 {
     ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
 }
 
+/// The deadline after `deadline` for a loop of `period` (ns) that finished its work at `now`:
+/// one period on, or, far behind (stopped in a debugger, the machine suspended, more than 100
+/// periods), re-anchored one period after `now` instead of a burst of late periods.
+pub fn next_deadline(deadline: u64, period: u64, now: u64) -> u64 {
+    let next = deadline + period;
+    if now > next + 100 * period {
+        now + period
+    } else {
+        next
+    }
+}
+
 /// Sleeps until the monotonic time `deadline_ns` (absolute, so periods do not drift). Returns
 /// at once if the deadline has passed; resumes after signals.
 pub fn sleep_until(deadline_ns: u64) {
@@ -221,6 +233,15 @@ mod tests {
     }
 
     /// Absolute sleeps never return early and the clock moves forward.
+    #[test]
+    fn a_loop_moves_one_period_on_and_re_anchors_far_behind() {
+        assert_eq!(next_deadline(1_000, 100, 1_050), 1_100);
+        // 100 periods late is still caught up period by period ...
+        assert_eq!(next_deadline(1_000, 100, 11_100), 1_100);
+        // ... beyond that, the loop starts again one period after now.
+        assert_eq!(next_deadline(1_000, 100, 11_101), 11_201);
+    }
+
     #[test]
     fn sleep_until_reaches_the_deadline() {
         let t0 = monotonic_ns();

@@ -199,9 +199,10 @@ fn estimator_killed_mid_request_answers_after_the_restart() {
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
 }
 
-/// Bursts of NaN, infinite, absurd, repeated, backwards and future force samples: the gate
-/// counts every one by kind, none reaches the controller as a value, and the run still agrees
-/// with the lockstep reference (they change nothing).
+/// Bursts of NaN, infinite, absurd, repeated, backwards and future force samples, with the
+/// servo killed between them: the gate judges every one sent to the servo by its kind (the
+/// counts cross the servo's restarts in the world snapshot), none reaches the controller as a
+/// value, and the run still agrees with the lockstep reference (they change nothing).
 #[test]
 fn bad_samples_are_counted_and_never_reach_the_controller() {
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
@@ -216,11 +217,15 @@ fn bad_samples_are_counted_and_never_reach_the_controller() {
             "--kills",
             "5",
             "--faults",
-            "bad-samples",
+            "bad-samples,kill-servo",
+            "--in-turn",
         ],
     );
     assert_correct(&out, &r);
-    let sent = chaos_of(&r).bad_samples.sent;
+    assert!(check(&r, "bad_samples_unjudged").pass);
+    assert!(check(&r, "bad_samples_misjudged").pass);
+    let bad = chaos_of(&r).bad_samples;
+    let sent = bad.sent;
     let each = [
         sent.nan,
         sent.infinite,
@@ -229,13 +234,18 @@ fn bad_samples_are_counted_and_never_reach_the_controller() {
         sent.backwards,
         sent.future,
     ];
-    assert_eq!(each, [5; 6], "{sent:?}");
-    let b = r.loop_stats.expect("loop statistics").bad_samples;
-    assert_eq!(b.non_finite, 10, "{b:?}");
-    assert_eq!(b.out_of_range, 5, "{b:?}");
-    assert_eq!(b.future, 5, "{b:?}");
-    assert_eq!(b.seq_repeat + b.seq_backwards, 10, "{b:?}");
-    assert!(b.seq_backwards >= 5, "{b:?}");
+    // Three bursts, each after a servo's data has flowed: every sample sent to a servo.
+    assert_eq!(each, [3; 6], "{sent:?}");
+    assert_eq!((bad.to_servo, bad.not_sent_to_servo), (sent, 0), "{bad:?}");
+    assert_eq!(process(&r, "servo").restarts, 2);
+    // The last servo's statistics hold the judgements of all three incarnations.
+    let j = bad.judged_by_servo.expect("the servo's statistics");
+    assert_eq!(j.judged(), 18, "{j:?}");
+    assert_eq!((j.non_finite, j.out_of_range, j.future), (6, 3, 3), "{j:?}");
+    assert_eq!(j.seq_repeat + j.seq_backwards + j.accepted, 6, "{j:?}");
+    assert!(j.accepted <= sent.repeat, "{j:?}");
+    let all = r.loop_stats.expect("loop statistics").bad_samples;
+    assert!(all.non_finite >= 6 && all.out_of_range >= 3, "{all:?}");
     assert_eq!(r.faults.controller_non_finite, 0);
     assert!(r.faults.controller_force_max_abs_n < 130.0);
     assert!(r.agreement.agrees, "{:#?}", r.agreement);

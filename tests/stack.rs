@@ -305,6 +305,77 @@ fn a_run_stopped_by_the_wall_time_limit_fails_by_name() {
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
 }
 
+/// A client built for the servo state's first layout (version 1, 208 bytes), written from the
+/// earlier docs/messages.md.
+const OLD_CLIENT: &str = r#"
+import ctypes, sys, time
+from afs_client import subscribe
+class ServoSample(ctypes.Structure):
+    _fields_ = [("raw", ctypes.c_uint64 * 26)]
+    @staticmethod
+    def type_name():
+        return "afs::ServoSample"
+opened = subscribe(sys.argv[1], "afs/servo/state", ServoSample, time.monotonic() + 20)
+sys.exit(2 if opened is None else 0)
+"#;
+
+/// A client built for an older layout of the servo's state is refused at once, naming both
+/// versions; a Python client still subscribed when the run ends is an observer: the run
+/// passes, names it and the service it reads, and leaves its files alone.
+#[test]
+fn an_old_client_is_refused_and_one_attached_at_the_end_is_an_observer() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let p = prefix("obs");
+    let _clean = CleanPrefix(p.clone());
+    let python = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/python");
+    let run = start_run(&p, &["--scenario", "surface-tracking", "--duration", "8"]);
+    wait_running(&p, Duration::from_secs(60));
+    let old = Command::new("python3")
+        .args(["-c", OLD_CLIENT, &p])
+        .env("PYTHONPATH", &python)
+        .output()
+        .expect("python3 is needed for this test");
+    let err = String::from_utf8_lossy(&old.stderr);
+    assert_eq!(old.status.code(), Some(2), "{err}");
+    for needle in [
+        "afs::ServoSample.v2 (layout version 2, 216 bytes)",
+        "afs::ServoSample (layout version 1, 208 bytes)",
+    ] {
+        assert!(err.contains(needle), "{err}");
+    }
+    let mut client = KillOnDrop(Some(
+        Command::new("python3")
+            .arg(python.join("servo_subscriber.py"))
+            .args(["--prefix", &p, "--count", "100000000", "--timeout", "600"])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap(),
+    ));
+    let out = finish(run.take(), "afs run");
+    let r = run_report(&out);
+    assert!(
+        out.status.success() && r.passed,
+        "{}\n{}",
+        failed(&r),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let obs = &r.cleanup.observers;
+    assert!(
+        obs.iter().any(|o| o.name == "servo_subscriber.py"
+            && o.pid == client.id() as i32
+            && o.services.iter().any(|s| s == "afs/servo/state")),
+        "{obs:?} (client {})",
+        client.id()
+    );
+    assert!(r.cleanup.left.is_empty(), "{:?}", r.cleanup.left);
+    assert!(String::from_utf8_lossy(&out.stdout).contains("servo_subscriber.py"));
+    if let Some(c) = client.0.as_mut() {
+        let _ = c.kill();
+        let _ = c.wait();
+    }
+}
+
 /// Bad input gets one clear line and exit status 2, never a panic or a hang.
 #[test]
 fn bad_input_is_refused_clearly() {
@@ -316,13 +387,13 @@ fn bad_input_is_refused_clearly() {
     let contradictory = dir.join("contradictory.toml");
     std::fs::write(
         &contradictory,
-        afs::supervisor::DEFAULT_STACK.replace("name = \"sensor\"", "name = \"servo\""),
+        afs::stack::DEFAULT_STACK.replace("name = \"sensor\"", "name = \"servo\""),
     )
     .unwrap();
     let missing_bin = dir.join("missing.toml");
     std::fs::write(
         &missing_bin,
-        afs::supervisor::DEFAULT_STACK.replace("binary = \"afs-sensor\"", "binary = \"afs-nope\""),
+        afs::stack::DEFAULT_STACK.replace("binary = \"afs-sensor\"", "binary = \"afs-nope\""),
     )
     .unwrap();
     let cases: Vec<(Vec<String>, &str)> = vec![
@@ -460,7 +531,7 @@ fn the_estimator_board_answers_requests() {
         }
     };
     let header = TangentRequestHeader {
-        version: msg::VERSION,
+        version: msg::TangentRequestHeader::VERSION,
         request_id: 7,
         base_angle_rad: base,
         plan: (&plan).into(),
@@ -519,7 +590,7 @@ fn the_estimator_board_answers_requests() {
     }
     let mut req = rclient.loan_slice_uninit(samples.len()).unwrap();
     *req.user_header_mut() = RotationRequestHeader {
-        version: msg::VERSION,
+        version: msg::RotationRequestHeader::VERSION,
         centres: 3,
         request_id: 1,
         centre_m,

@@ -5,7 +5,8 @@
 //!
 //! Stack tests run one at a time (a lock) with their own prefixes; none asserts a run time.
 
-use afs::tools::record::{self, TOPICS, json_schema};
+use afs::tools::record;
+use afs::tools::topics::{TOPICS, json_schema};
 use afs::tools::view::ViewSummary;
 use afs::tools::view_client::{Received, ViewClient};
 use serde_json::Value;

@@ -1,21 +1,56 @@
 """What the afs Python clients share: a node on a stack's prefix, and a subscriber of one of its
-publish-subscribe services, waiting while the stack (or the link to it) is starting."""
+publish-subscribe services, waiting while the stack (or the link to it) is starting, and refusing
+clearly when the stack's message layout is not the client's (docs/messages.md, *Versions*)."""
 
+import ctypes
+import re
 import sys
 import time
 
 import iceoryx2 as iox2
 
 
-def subscribe(prefix, service_name, payload_type, deadline, buffer_size=None):
+def layout_version(type_name):
+    """The layout version an afs type name carries: `afs::Name.vN` is N, `afs::Name` is 1."""
+    m = re.search(r"\.v(\d+)$", type_name)
+    return int(m.group(1)) if m else 1
+
+
+def service_payload(config, service_name):
+    """The payload type name and size of the publish-subscribe service `service_name`, or None.
+
+    iceoryx2's Python binding (0.10) gives a service's static config only in its text form,
+    which names the payload's type and size."""
+    try:
+        details = iox2.Service.details(
+            iox2.ServiceName.new(service_name),
+            config,
+            iox2.MessagingPattern.PublishSubscribe,
+            iox2.ServiceType.Ipc,
+        )
+    except Exception:  # pylint: disable=broad-except
+        return None
+    if details is None:
+        return None
+    m = re.search(r'payload: TypeDetail \{.*?data: "([^"]*)".*?size: (\d+)', str(details), re.S)
+    return (m.group(1), int(m.group(2))) if m else None
+
+
+def subscribe(prefix, service_name, payload_type, deadline, buffer_size=None, node_name=None):
     """A subscriber of ``service_name`` (payload ``payload_type``) of stack ``prefix``, and the
     node that owns it (keep both alive); None if the service is not there by ``deadline``
-    (``time.monotonic()``), said on stderr."""
+    (``time.monotonic()``), or carries another layout version than ``payload_type``, said on
+    stderr. ``node_name`` names the node (what `afs run` reports of a client still attached
+    when the stack ends)."""
     iox2.set_log_level_from_env_or(iox2.LogLevel.Warn)
     config = iox2.config.global_config()
     # The stack isolates its shared memory with this file-name prefix (docs/messages.md).
     config.global_cfg.prefix = iox2.FileName.new(f"afs_{prefix}_")
-    node = iox2.NodeBuilder.new().config(config).create(iox2.ServiceType.Ipc)
+    builder = iox2.NodeBuilder.new().config(config)
+    if node_name is not None:
+        builder = builder.name(iox2.NodeName.new(node_name))
+    node = builder.create(iox2.ServiceType.Ipc)
+    ours = payload_type.type_name()
     while True:
         try:
             service = (
@@ -25,6 +60,16 @@ def subscribe(prefix, service_name, payload_type, deadline, buffer_size=None):
             )
             break
         except Exception as e:  # the stack may still be starting
+            theirs = service_payload(config, service_name)
+            if theirs is not None and theirs[0] != ours:
+                print(
+                    f"'{service_name}' of stack '{prefix}' carries {theirs[0]} (layout version "
+                    f"{layout_version(theirs[0])}, {theirs[1]} bytes); this client reads {ours} "
+                    f"(layout version {layout_version(ours)}, {ctypes.sizeof(payload_type)} "
+                    "bytes): update the client's struct from docs/messages.md",
+                    file=sys.stderr,
+                )
+                return None
             if time.monotonic() > deadline:
                 print(f"no afs stack with prefix '{prefix}': {e}", file=sys.stderr)
                 return None

@@ -1,6 +1,7 @@
 """Subscribes to a running afs stack's controller stream (the servo's state) from Python.
 
-The payload is decoded with the byte layout of docs/messages.md (``ServoSample``, 216 bytes).
+The payload is decoded with the byte layout of docs/messages.md (``ServoSample`` version 2,
+216 bytes).
 The stream crosses the link board (docs/link.md), so this works the same on the controller's
 host and on a remote host that its link board reaches.
 
@@ -21,7 +22,7 @@ from afs_client import subscribe
 
 
 class ServoSample(ctypes.Structure):
-    """``afs::ServoSample``: the controller's state of one servo tick (docs/messages.md)."""
+    """``afs::ServoSample.v2``: the controller's state of one servo tick (docs/messages.md)."""
 
     _fields_ = [
         ("version", ctypes.c_uint32),
@@ -60,12 +61,12 @@ class ServoSample(ctypes.Structure):
     @staticmethod
     def type_name() -> str:
         """The iceoryx2 type name the Rust side registers."""
-        return "afs::ServoSample"
+        return "afs::ServoSample.v2"
 
 
 assert ctypes.sizeof(ServoSample) == 216, "layout differs from docs/messages.md"
 
-LAYOUT_VERSION = 1
+LAYOUT_VERSION = 2
 
 
 def main() -> int:
@@ -78,7 +79,14 @@ def main() -> int:
 
     deadline = time.monotonic() + args.timeout
     # One second of ticks: the stream comes in bursts of 50 across a link, and Python is slow.
-    opened = subscribe(args.prefix, "afs/servo/state", ServoSample, deadline, buffer_size=10_000)
+    opened = subscribe(
+        args.prefix,
+        "afs/servo/state",
+        ServoSample,
+        deadline,
+        buffer_size=10_000,
+        node_name="servo_subscriber.py",
+    )
     if opened is None:
         return 2
     _node, subscriber = opened

@@ -63,7 +63,9 @@ def main() -> int:
     args = parser.parse_args()
 
     deadline = time.monotonic() + args.timeout
-    opened = subscribe(args.prefix, "afs/sensor/wrench", WrenchSample, deadline)
+    opened = subscribe(
+        args.prefix, "afs/sensor/wrench", WrenchSample, deadline, node_name="wrench_subscriber.py"
+    )
     if opened is None:
         return 2
     _node, subscriber = opened

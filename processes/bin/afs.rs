@@ -81,7 +81,7 @@ struct RunArgs {
 }
 
 /// Runs a stack (with faults if `chaos` is set) and prints its summary.
-fn run_stack(a: RunArgs, chaos: Option<supervisor::ChaosOptions>) -> Result<ExitCode> {
+fn run_stack(a: RunArgs, chaos: Option<afs::stack::ChaosOptions>) -> Result<ExitCode> {
     if let Some(d) = a.duration
         && !(d.is_finite() && d >= 0.0)
     {
@@ -93,7 +93,7 @@ fn run_stack(a: RunArgs, chaos: Option<supervisor::ChaosOptions>) -> Result<Exit
         .map(|addr| afs::tools::view::ViewSettings::parse(addr, a.foxglove_hz))
         .transpose()?;
     let stop = afs::boards::stop_flag()?;
-    let opts = supervisor::RunOptions {
+    let opts = afs::stack::RunOptions {
         config: a.config,
         scenario: a.scenario,
         duration: a.duration,
@@ -160,7 +160,12 @@ enum Command {
         rig: String,
     },
     /// Print the byte layout of every message exchanged over iceoryx2 (docs/messages.md).
-    Messages,
+    Messages {
+        /// Print each message's line of the wire-compatibility table instead
+        /// (`name version size fingerprint`, shared/src/msg/versions.txt).
+        #[arg(long)]
+        table: bool,
+    },
     /// Print the iceoryx2 config that lets the upstream `iox2` CLI (iceoryx2-cli 0.10) and any
     /// iceoryx2 program see a running stack, or write it as DIR/config/iceoryx2.toml
     /// (docs/stack.md, *Inspecting a stack with iox2*).
@@ -459,7 +464,7 @@ fn run() -> Result<ExitCode> {
             let seed = run.seed.unwrap_or(1);
             run_stack(
                 run,
-                Some(supervisor::ChaosOptions {
+                Some(afs::stack::ChaosOptions {
                     faults: kills,
                     seed,
                     kinds,
@@ -613,9 +618,13 @@ fn run() -> Result<ExitCode> {
             }
             Ok(ExitCode::SUCCESS)
         }
-        Command::Messages => {
+        Command::Messages { table } => {
             for l in afs_shared::msg::layouts() {
-                say!("{}", l.markdown());
+                if !table {
+                    say!("{}", l.markdown());
+                } else if l.version.is_some() {
+                    say!("{}", l.table_line());
+                }
             }
             Ok(ExitCode::SUCCESS)
         }

@@ -84,7 +84,7 @@ pub fn run(prefix: &str, mut startup: Startup, stop: &AtomicBool) -> Result<Esti
     let mut ident = OnlineFrictionId::new(0.2, 0.25, 4096);
     let mut summary = EstimatorSummary::default();
     let mut report = FrictionReport {
-        version: msg::VERSION,
+        version: msg::FrictionReport::VERSION,
         mu: f64::NAN,
         mu_std: f64::NAN,
         kinetic_n: f64::NAN,
@@ -108,7 +108,7 @@ pub fn run(prefix: &str, mut startup: Startup, stop: &AtomicBool) -> Result<Esti
         let _ = rotation_answers.update_connections();
         startup.update_connections();
         while let Ok(Some(s)) = servo_sub.receive() {
-            if s.payload().version == msg::VERSION {
+            if s.payload().version == msg::ServoSample::VERSION {
                 ident.push(&IdentTick::from(s.payload()));
             }
         }
@@ -173,7 +173,7 @@ fn answer_tangent(
     samples: &[ProbeSample],
     summary: &mut EstimatorSummary,
 ) -> TangentResponse {
-    let answer = if h.version != msg::VERSION {
+    let answer = if h.version != msg::TangentRequestHeader::VERSION {
         None
     } else {
         match (h.plan.to_plan(), h.params.to_params()) {
@@ -202,7 +202,7 @@ fn answer_rotation(
 ) -> RotationResponse {
     let n = (h.centres as usize).min(msg::MAX_CENTRES);
     let mut r = RotationResponse {
-        version: msg::VERSION,
+        version: msg::RotationResponse::VERSION,
         request_id: h.request_id,
         outcome: Outcome::BadRequest.into(),
         centre_m: [f64::NAN; 2],
@@ -211,7 +211,7 @@ fn answer_rotation(
         coupling: f64::NAN,
         ..Default::default()
     };
-    if h.version == msg::VERSION && n >= 3 {
+    if h.version == msg::RotationRequestHeader::VERSION && n >= 3 {
         let centres: Vec<Vec2> = h.centre_m[..n]
             .iter()
             .map(|c| Vec2::new(c[0], c[1]))

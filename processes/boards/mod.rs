@@ -100,7 +100,7 @@ impl Startup {
     pub fn new(board: Board, main_ns: u64) -> Self {
         Self {
             report: BoardStartup {
-                version: msg::VERSION,
+                version: msg::BoardStartup::VERSION,
                 board: board.into(),
                 pid: std::process::id() as i32,
                 main_ns,

@@ -148,7 +148,7 @@ fn serve(args: &NetftArgs, stop: &AtomicBool) -> Result<NetftSummary> {
         }
         while let Ok(Some(s)) = plant_sub.receive() {
             let p = *s.payload();
-            if p.version == msg::VERSION && latest.is_none_or(|l| p.seq >= l.seq) {
+            if p.version == msg::PlantSample::VERSION && latest.is_none_or(|l| p.seq >= l.seq) {
                 latest = Some(p);
             }
         }

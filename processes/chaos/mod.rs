@@ -2,15 +2,18 @@
 //!
 //! [`plan`] builds the fault plan (which kinds the scenario allows, each kind's span from the
 //! stack file's policies; `afs_shared::faults::plan` places them); the [`Injector`], in the
-//! supervisor's loop, injects them and times the recovery, and [`LinkCut`] runs the stack
+//! supervisor's loop, injects them and times the recovery ([`BadSampleSender`] sends and
+//! counts the bad force samples), and [`LinkCut`] runs the stack
 //! file's commands that cut the link and restore it; [`ChaosReport`] is what the run's
 //! report adds, with the checks that follow.
 
+mod bad;
 mod cut;
 mod inject;
 mod plan;
 mod report;
 
+pub use bad::BadSampleSender;
 pub use cut::LinkCut;
 pub use inject::*;
 pub use plan::{MAX_FAULTS, plan};

@@ -2,7 +2,7 @@
 //! the stack file's policies and the scenario's probe ([`afs_shared::faults::plan`] places them).
 
 use super::inject::{MIN_UPTIME, THAW_AFTER};
-use crate::supervisor::{ChaosOptions, LINK_PROCESS, ProcessSpec, StackFile};
+use crate::stack::{ChaosOptions, LINK_PROCESS, ProcessSpec, StackFile};
 use afs_shared::faults::{self, FaultKind};
 use afs_shared::msg::Board;
 use afs_shared::scenario::{self, Scenario};

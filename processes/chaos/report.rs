@@ -3,10 +3,11 @@
 //! checks that follow from them.
 
 use super::inject::FaultRecord;
-use crate::supervisor::{Footprint, GateCounts};
+use crate::stack::Footprint;
 use afs_shared::check::Check;
 use afs_shared::faults::BadCounts;
 use afs_shared::faults::FaultFigures;
+use afs_shared::watchdog::GateCounters;
 use serde::{Deserialize, Serialize};
 use std::fmt;
 
@@ -62,13 +63,46 @@ pub struct BackAfterKill {
     pub link: BackSummary,
 }
 
-/// Bad samples sent, and what the (last) servo's gate counted.
+/// Bad samples sent, and what the servo's gate made of them: every one is judged by the gate
+/// or reported with the cause of its drop.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct BadSampleReport {
     /// Sent, by kind.
     pub sent: BadCounts,
-    /// Counted by the last servo (a restarted servo counts from zero).
-    pub counted_by_last_servo: Option<GateCounts>,
+    /// Of those, sent while the servo's subscriber was on the service; the others reached no
+    /// servo (one being restarted): `not_sent_to_servo`.
+    pub to_servo: BadCounts,
+    /// Sent while no servo's subscriber was on the service (dropped: no servo to judge them).
+    pub not_sent_to_servo: u64,
+    /// What the servo's gate made of the injected samples it received, over every servo
+    /// incarnation (None: no loop statistics came).
+    pub judged_by_servo: Option<GateCounters>,
+}
+
+impl BadSampleReport {
+    /// Bad samples sent to the servo that its gate never judged (lost on the way, or received
+    /// by an incarnation that died before its counts reached its snapshot).
+    pub fn unjudged(&self) -> Option<u64> {
+        let j = self.judged_by_servo?;
+        Some(self.to_servo.total().abs_diff(j.judged()))
+    }
+
+    /// Judged samples whose verdict does not fit their kind: NaN and infinite → non-finite,
+    /// absurd → out of range, future → future, repeated and backwards → repeat, backwards, or
+    /// accepted (a repeat of a sample this servo never saw is not a repeat); anything else
+    /// accepted reached the controller.
+    pub fn misjudged(&self) -> Option<u64> {
+        let (j, b) = (self.judged_by_servo?, &self.to_servo);
+        let accepted_beyond_repeats = j.accepted.saturating_sub(b.repeat);
+        Some(
+            j.non_finite.abs_diff(b.nan + b.infinite)
+                + j.out_of_range.abs_diff(b.absurd)
+                + j.future.abs_diff(b.future)
+                + (j.seq_repeat + j.seq_backwards + j.accepted).abs_diff(b.repeat + b.backwards)
+                + j.version
+                + accepted_beyond_repeats,
+        )
+    }
 }
 
 /// The chaos part of the report.
@@ -100,20 +134,17 @@ pub struct Measured<'a> {
     pub faults: &'a FaultFigures,
     /// The preload (N).
     pub preload_n: f64,
-    /// The last servo's gate counters.
-    pub gate: Option<GateCounts>,
-    /// The servo was restarted (its gate counted from zero again).
+    /// The servo was restarted.
     pub servo_restarted: bool,
 }
 
 impl ChaosReport {
-    /// The report of the injector's `records` (with each one's restart timeline) and
-    /// `bad_sent`, and the footprints.
+    /// The report of the injector's `records` (with each one's restart timeline), the bad
+    /// samples (sent, and judged by the servo's gate), and the footprints.
     pub fn new(
         planned: usize,
         faults: Vec<FaultRecord>,
-        bad_sent: BadCounts,
-        gate: Option<GateCounts>,
+        bad_samples: BadSampleReport,
         steady: [Option<Footprint>; 2],
     ) -> Self {
         let detected: Vec<f64> = faults.iter().filter_map(|r| r.detected_ms).collect();
@@ -132,10 +163,7 @@ impl ChaosReport {
             },
             freeze_detected_ms_max: max_of(&detected),
             back_beyond_backoff_ms_max: max_of(&beyond_backoff(&faults)),
-            bad_samples: BadSampleReport {
-                sent: bad_sent,
-                counted_by_last_servo: gate,
-            },
+            bad_samples,
             faults,
             steady_before_first_fault,
             steady_after_last_fault,
@@ -218,21 +246,18 @@ impl ChaosReport {
                 .target(),
             );
         }
-        let b = &self.bad_samples.sent;
-        // The gate's counters live in the servo: a restarted servo starts them again.
-        if b.total() > 0
-            && !m.servo_restarted
-            && let Some(g) = m.gate
-        {
-            let diff = |counted: u64, sent: u64| counted.abs_diff(sent);
-            let miscount = diff(g.non_finite, b.nan + b.infinite)
-                + diff(g.out_of_range, b.absurd)
-                + diff(g.seq_repeat + g.seq_backwards, b.repeat + b.backwards)
-                + diff(g.future, b.future);
+        let b = &self.bad_samples;
+        if b.sent.total() > 0 {
             checks.push(Check::at_most(
-                "bad_samples_uncounted",
-                "bad samples sent but not counted by the servo's gate",
-                miscount as f64,
+                "bad_samples_unjudged",
+                "bad samples sent to the servo that its gate did not judge",
+                b.unjudged().map_or(f64::NAN, |n| n as f64),
+                0.0,
+            ));
+            checks.push(Check::at_most(
+                "bad_samples_misjudged",
+                "bad samples the gate judged other than their kind (or let through)",
+                b.misjudged().map_or(f64::NAN, |n| n as f64),
                 0.0,
             ));
         }

@@ -1,59 +1,38 @@
-//! What a running stack holds at one moment: its iceoryx2 files (and those of dead processes,
-//! each named with who left it) and the resident memory of the supervisor and the boards.
+//! Measuring a running stack's [`Footprint`]: its iceoryx2 files (those of dead processes named
+//! with who left them) and the resident memory of the supervisor and the boards.
 
 use super::child::Proc;
 use crate::ipc;
 use crate::procfs::{self, Rss};
+use crate::stack::Footprint;
 use afs_shared::msg::ProcessState;
-use serde::{Deserialize, Serialize};
 use std::path::Path;
 use std::time::Instant;
 
-/// Shared memory and resident memory of a running stack, at one moment.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Footprint {
-    /// Wall time since the stack started (s).
-    #[serde(deserialize_with = "afs_shared::nan::or_null")]
-    pub at_s: f64,
-    /// iceoryx2 files of the prefix in /dev/shm and the iceoryx2 root.
-    pub shm_files: usize,
-    /// Their total size (bytes).
-    pub shm_bytes: u64,
-    /// Those of dead processes ([`ipc::stale_files`]): leaks.
-    pub stale_files: Vec<String>,
-    /// Resident memory of the supervisor (KiB): its heap and stacks (RssAnon), and all of it
-    /// (VmRSS, which also counts the pages of shared memory it has read so far).
-    pub supervisor_rss_kib: Rss,
-    /// Resident memory of the boards (KiB), servo, sensor and estimator summed.
-    pub boards_rss_kib: Rss,
-}
-
-impl Footprint {
-    /// The stack `prefix` now (`t0`: when it started).
-    pub fn now(prefix: &str, procs: &[Proc], t0: Instant) -> Self {
-        let files = ipc::leftovers(prefix);
-        let boards_rss_kib = procs
+/// The stack `prefix` now (`t0`: when it started).
+pub fn now(prefix: &str, procs: &[Proc], t0: Instant) -> Footprint {
+    let files = ipc::leftovers(prefix);
+    let boards_rss_kib = procs
+        .iter()
+        .filter(|p| p.state == ProcessState::Running)
+        .map(|p| procfs::rss(p.pid()))
+        .fold(Rss::default(), |a, b| a + b);
+    let stale = ipc::stale_files(prefix).unwrap_or_default();
+    Footprint {
+        at_s: t0.elapsed().as_secs_f64(),
+        shm_files: files.len(),
+        stale_files: stale
             .iter()
-            .filter(|p| p.state == ProcessState::Running)
-            .map(|p| procfs::rss(p.pid()))
-            .fold(Rss::default(), |a, b| a + b);
-        let stale = ipc::stale_files(prefix).unwrap_or_default();
-        Footprint {
-            at_s: t0.elapsed().as_secs_f64(),
-            shm_files: files.len(),
-            stale_files: stale
-                .iter()
-                .map(|f| describe_file(f, prefix, procs))
-                .collect(),
-            shm_bytes: files
-                .iter()
-                .filter_map(|f| std::fs::metadata(f).ok())
-                .filter(|m| m.is_file())
-                .map(|m| m.len())
-                .sum(),
-            supervisor_rss_kib: procfs::rss(std::process::id() as i32),
-            boards_rss_kib,
-        }
+            .map(|f| describe_file(f, prefix, procs))
+            .collect(),
+        shm_bytes: files
+            .iter()
+            .filter_map(|f| std::fs::metadata(f).ok())
+            .filter(|m| m.is_file())
+            .map(|m| m.len())
+            .sum(),
+        supervisor_rss_kib: procfs::rss(std::process::id() as i32),
+        boards_rss_kib,
     }
 }
 

@@ -1,7 +1,7 @@
 //! The supervisor's restart, backoff and stall policy, as pure functions of what happened to a
 //! board (the stack file's `restart`, `max_restarts`, `backoff_ms`, `stall_ms`).
 
-use super::stack::Restart;
+use crate::stack::Restart;
 use afs_shared::msg::Board;
 use std::time::Duration;
 

@@ -1,37 +1,21 @@
 //! The report of `afs run` and `afs chaos` (`--json` prints it; the tests read it back), its
 //! checks, and its text summary.
 
-use super::child::{ExitRecord, Timeline};
+use super::child::ExitRecord;
 use super::watch::RunEnd;
+pub use crate::boards::sensor::{RdtReport, SensorReport};
 use crate::chaos::ChaosReport;
 pub use crate::hist::QuantilesUs;
+use crate::stack::Timeline;
 use crate::tools::record::RecordSummary;
 use afs_shared::check::{self, Check};
 use afs_shared::faults::FaultFigures;
 use afs_shared::join::SampleCounts;
-use afs_shared::msg::{
-    FrictionReport, FrictionStatus, LoopFlags, LoopStats, SensorSource, SensorStats,
-};
+use afs_shared::msg::{FrictionReport, FrictionStatus, LoopFlags, LoopStats};
 use afs_shared::scenario::{Agreement, ScenarioReport};
+pub use afs_shared::watchdog::GateCounters;
 use serde::{Deserialize, Serialize};
 use std::fmt;
-
-/// Force samples the servo's gate refused, by reason.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub struct GateCounts {
-    /// NaN or infinite.
-    pub non_finite: u64,
-    /// Beyond the sensor's rated range.
-    pub out_of_range: u64,
-    /// The same sequence number again.
-    pub seq_repeat: u64,
-    /// An older sequence number or sensor epoch.
-    pub seq_backwards: u64,
-    /// Timestamped in the future.
-    pub future: u64,
-    /// Wrong message version.
-    pub version: u64,
-}
 
 /// The estimator requests the servo made.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -51,99 +35,6 @@ pub struct CommandCounts {
     pub received: u64,
     /// Refused (unknown version or code).
     pub refused: u64,
-}
-
-/// What an RDT device sent (`SensorStats`' `rdt_*` fields, times in µs).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
-pub struct RdtReport {
-    /// Datagrams received.
-    pub datagrams: u64,
-    /// Datagrams that were not whole records.
-    pub bad_datagrams: u64,
-    /// Records received.
-    pub records: u64,
-    /// Records missing from the stream.
-    pub lost: u64,
-    /// Records received twice.
-    pub repeated: u64,
-    /// Records older than one received before.
-    pub reordered: u64,
-    /// Records later than the late limit.
-    pub late: u64,
-    /// Records with a non-zero status word.
-    pub status_errors: u64,
-    /// The last non-zero status word.
-    pub last_status: u32,
-    /// Records arriving when last reported.
-    pub streaming: bool,
-    /// Streaming requests sent.
-    pub requests: u64,
-    /// Time between datagrams (µs).
-    pub interval_us: QuantilesUs,
-    /// Excess delay of the records over the least-delayed one (µs).
-    pub excess_delay_us: QuantilesUs,
-}
-
-/// The sensor board's statistics (`SensorStats`).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct SensorReport {
-    /// Where its samples came from.
-    pub source: SensorSource,
-    /// Samples published.
-    pub published: u64,
-    /// Model: periods that woke a whole period late.
-    pub late_periods: u64,
-    /// RDT: what the device sent (None for the model).
-    pub rdt: Option<RdtReport>,
-}
-
-impl From<&SensorStats> for SensorReport {
-    fn from(s: &SensorStats) -> Self {
-        let source = SensorSource::try_from(s.source).unwrap_or(SensorSource::Model);
-        Self {
-            source,
-            published: s.published,
-            late_periods: s.late_periods,
-            rdt: (source == SensorSource::Rdt).then(|| RdtReport {
-                datagrams: s.rdt_datagrams,
-                bad_datagrams: s.rdt_bad_datagrams,
-                records: s.rdt_records,
-                lost: s.rdt_lost,
-                repeated: s.rdt_repeated,
-                reordered: s.rdt_reordered,
-                late: s.rdt_late,
-                status_errors: s.rdt_status_errors,
-                last_status: s.rdt_last_status,
-                streaming: s.rdt_streaming != 0,
-                requests: s.rdt_requests,
-                interval_us: (&s.rdt_interval).into(),
-                excess_delay_us: (&s.rdt_excess_delay).into(),
-            }),
-        }
-    }
-}
-
-impl fmt::Display for RdtReport {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "{} records in {} datagrams ({} not RDT); lost {}, repeated {}, reordered {}, late {}, bad status {}; {} requests; interval p50/p99/max {:.1}/{:.1}/{:.1} µs; excess delay p99/max {:.1}/{:.1} µs",
-            self.records,
-            self.datagrams,
-            self.bad_datagrams,
-            self.lost,
-            self.repeated,
-            self.reordered,
-            self.late,
-            self.status_errors,
-            self.requests,
-            self.interval_us.p50,
-            self.interval_us.p99,
-            self.interval_us.max,
-            self.excess_delay_us.p99,
-            self.excess_delay_us.max,
-        )
-    }
 }
 
 /// The servo loop's statistics (`LoopStats`, latencies in µs).
@@ -168,8 +59,11 @@ pub struct LoopReport {
     pub exec_us: QuantilesUs,
     /// Age of the force data at use (µs).
     pub force_age_us: QuantilesUs,
-    /// Force samples refused.
-    pub bad_samples: GateCounts,
+    /// The gate's verdicts on every force sample (refused ones by reason, and accepted).
+    pub bad_samples: GateCounters,
+    /// Of those, the samples flagged as injected (`afs chaos`): received and judged.
+    #[serde(default)]
+    pub injected: GateCounters,
     /// Ticks whose newest force data was too old.
     pub stale_ticks: u64,
     /// Entries into the safe state.
@@ -196,14 +90,8 @@ impl From<&LoopStats> for LoopReport {
             wake_jitter_us: (&s.wake_latency).into(),
             exec_us: (&s.exec).into(),
             force_age_us: (&s.force_age).into(),
-            bad_samples: GateCounts {
-                non_finite: s.bad_non_finite,
-                out_of_range: s.bad_out_of_range,
-                seq_repeat: s.bad_seq_repeat,
-                seq_backwards: s.bad_seq_backwards,
-                future: s.bad_future,
-                version: s.bad_version,
-            },
+            bad_samples: s.gate,
+            injected: s.injected,
             stale_ticks: s.stale_ticks,
             safe_entries: s.safe_entries,
             safe_ticks: s.safe_ticks,
@@ -287,8 +175,13 @@ pub struct ProcessReport {
 /// What the run left behind.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Cleanup {
-    /// Files of the prefix still there after the run (a leak).
+    /// What the stack leaked: files of the prefix no live node owns (its own, or a dead
+    /// process's), and any of its own processes' nodes still alive.
     pub left: Vec<String>,
+    /// Clients still attached when the run ended (`afs view`, Python clients): their nodes
+    /// and files are theirs, left alone.
+    #[serde(default)]
+    pub observers: Vec<crate::ipc::Observer>,
 }
 
 /// The report of `afs run` (and, with `chaos`, of `afs chaos`).
@@ -425,6 +318,19 @@ impl fmt::Display for RunReport {
             fl.normal_force_max_n,
             fl.normal_force_max_over_preload,
         )?;
+        for o in &self.cleanup.observers {
+            writeln!(
+                f,
+                "  observer still attached at the end (its files left alone): {} pid {} on {}",
+                if o.name.is_empty() {
+                    "(unnamed)"
+                } else {
+                    &o.name
+                },
+                o.pid,
+                o.services.join(", ")
+            )?;
+        }
         for c in &self.checks {
             writeln!(f, "  {}", c.line())?;
         }

@@ -3,8 +3,7 @@
 //! the stack falls silent with none of its nodes left. `afs view` and `afs record` are built
 //! on it; on a remote host they follow what the link board carries (docs/link.md).
 
-use super::record::Rec;
-use super::view::live;
+use super::topics::{Rec, live};
 use crate::ipc::{self, Svc};
 use afs_shared::join::Joiner;
 use afs_shared::msg::{

@@ -6,11 +6,7 @@
 //! serialises and writes them in the order received. A full channel drops the sample and
 //! counts it (the summary reports the count), so a slow disk can never stall the supervisor.
 
-use afs_shared::live::LiveSample;
-use afs_shared::msg::{
-    self, FrictionReport, LoopStats, PlantSample, SensorStats, ServoSample, SupervisorStatus,
-    WrenchSample,
-};
+use super::topics::{Rec, TOPICS, json_schema};
 use anyhow::{Context, Result};
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -18,86 +14,6 @@ use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
 use std::thread::JoinHandle;
-
-/// One recorded sample.
-#[derive(Debug, Clone, Copy)]
-pub enum Rec {
-    /// `/plant`.
-    Plant(PlantSample),
-    /// `/servo`.
-    Servo(ServoSample),
-    /// `/wrench`.
-    Wrench(WrenchSample),
-    /// `/loop_stats`.
-    Stats(LoopStats),
-    /// `/friction`.
-    Friction(FrictionReport),
-    /// `/supervisor`.
-    Status(SupervisorStatus),
-    /// `/sensor_stats`.
-    SensorStats(SensorStats),
-    /// `/live`: the tick's display record, from its world and controller samples.
-    Live(LiveSample),
-}
-
-/// The topics, in channel order: (topic, message type name).
-pub const TOPICS: [(&str, &str); 8] = [
-    ("/plant", "afs::PlantSample"),
-    ("/servo", "afs::ServoSample"),
-    ("/wrench", "afs::WrenchSample"),
-    ("/loop_stats", "afs::LoopStats"),
-    ("/friction", "afs::FrictionReport"),
-    ("/supervisor", "afs::SupervisorStatus"),
-    ("/sensor_stats", "afs::SensorStats"),
-    ("/live", "afs::LiveSample"),
-];
-
-impl Rec {
-    /// Its index in [`TOPICS`].
-    pub fn channel(&self) -> usize {
-        match self {
-            Rec::Plant(_) => 0,
-            Rec::Servo(_) => 1,
-            Rec::Wrench(_) => 2,
-            Rec::Stats(_) => 3,
-            Rec::Friction(_) => 4,
-            Rec::Status(_) => 5,
-            Rec::SensorStats(_) => 6,
-            Rec::Live(_) => 7,
-        }
-    }
-
-    /// Its publication time (ns, monotonic): the recording's log time.
-    pub fn publish_ns(&self) -> u64 {
-        match self {
-            Rec::Plant(s) => s.publish_ns,
-            Rec::Servo(s) => s.publish_ns,
-            Rec::Wrench(s) => s.publish_ns,
-            Rec::Stats(s) => s.publish_ns,
-            Rec::Friction(s) => s.publish_ns,
-            Rec::Status(s) => s.publish_ns,
-            Rec::SensorStats(s) => s.publish_ns,
-            Rec::Live(s) => s.publish_ns,
-        }
-    }
-
-    /// Its JSON encoding.
-    pub fn json(&self) -> serde_json::Result<Vec<u8>> {
-        fn j<T: Serialize>(t: &T) -> serde_json::Result<Vec<u8>> {
-            serde_json::to_vec(t)
-        }
-        match self {
-            Rec::Plant(s) => j(s),
-            Rec::Servo(s) => j(s),
-            Rec::Wrench(s) => j(s),
-            Rec::Stats(s) => j(s),
-            Rec::Friction(s) => j(s),
-            Rec::Status(s) => j(s),
-            Rec::SensorStats(s) => j(s),
-            Rec::Live(s) => j(s),
-        }
-    }
-}
 
 /// What a recording holds.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, serde::Deserialize)]
@@ -165,57 +81,6 @@ impl Recorder {
         s.offered = self.offered;
         Ok(s)
     }
-}
-
-/// A JSON schema of a message type, from its byte layout (numbers, arrays of numbers, nested
-/// objects).
-pub fn json_schema(type_name: &str) -> String {
-    if type_name == "afs::LiveSample" {
-        return live_schema().to_string();
-    }
-    let layouts = msg::layouts();
-    let Some(l) = layouts.iter().find(|l| l.type_name == type_name) else {
-        return r#"{"type":"object"}"#.into();
-    };
-    let mut props = serde_json::Map::new();
-    for f in &l.fields {
-        let scalar = if f.ty.starts_with('u') || f.ty.starts_with('i') {
-            "integer"
-        } else if f.ty.starts_with("bool") {
-            "boolean"
-        } else if f.ty.starts_with('f') {
-            "number"
-        } else {
-            "object"
-        };
-        let v = if f.ty.contains('[') {
-            serde_json::json!({"type": "array", "items": {"type": scalar}})
-        } else {
-            serde_json::json!({"type": scalar})
-        };
-        props.insert(f.name.to_string(), v);
-    }
-    serde_json::json!({"type": "object", "title": type_name, "properties": props}).to_string()
-}
-
-/// The schema of [`LiveSample`] (not an iceoryx2 message, so without a byte layout): every
-/// field typed as it serialises.
-fn live_schema() -> serde_json::Value {
-    let value = serde_json::to_value(LiveSample::default()).unwrap_or_default();
-    let props: serde_json::Map<String, serde_json::Value> = value
-        .as_object()
-        .into_iter()
-        .flatten()
-        .map(|(k, v)| {
-            let ty = match v {
-                serde_json::Value::Bool(_) => "boolean",
-                serde_json::Value::Number(n) if n.is_f64() => "number",
-                _ => "integer",
-            };
-            (k.clone(), serde_json::json!({ "type": ty }))
-        })
-        .collect();
-    serde_json::json!({"type": "object", "title": "afs::LiveSample", "properties": props})
 }
 
 fn write_all(file: std::fs::File, rx: Receiver<Rec>, path: PathBuf) -> Result<RecordSummary> {
@@ -453,30 +318,6 @@ mod tests {
         w.write_record(out.iter().map(|f| f.1.as_str())).unwrap();
         let text = String::from_utf8(w.into_inner().unwrap()).unwrap();
         assert_eq!(text, "1.5,1,2,\"probing, fast\",\n");
-    }
-}
-
-#[cfg(test)]
-mod schema_tests {
-    use super::{TOPICS, json_schema};
-    use afs_shared::live::LiveSample;
-
-    /// Every topic's schema lists exactly the fields its JSON carries, typed as they serialise.
-    #[test]
-    fn every_schema_types_the_fields_its_messages_carry() {
-        let live = serde_json::to_value(LiveSample::default()).unwrap();
-        for (topic, ty) in TOPICS {
-            let schema: serde_json::Value = serde_json::from_str(&json_schema(ty)).unwrap();
-            let props = schema["properties"].as_object();
-            assert!(props.is_some_and(|p| !p.is_empty()), "{topic}: {schema}");
-        }
-        let schema: serde_json::Value =
-            serde_json::from_str(&json_schema("afs::LiveSample")).unwrap();
-        let props = schema["properties"].as_object().unwrap();
-        assert_eq!(props.len(), live.as_object().unwrap().len());
-        assert_eq!(props["seq"]["type"], "integer");
-        assert_eq!(props["tangent_error_deg"]["type"], "number");
-        assert_eq!(props["safe"]["type"], "boolean");
     }
 }
 

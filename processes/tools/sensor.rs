@@ -3,8 +3,9 @@
 //! jitter. The same receiver as the sensor board's RDT source (`boards::sensor::rdt`).
 
 use crate::boards::sensor::rdt::{Poll, RdtSettings, Receiver, copy_counters};
-use crate::supervisor::{RdtReport, SensorReport};
-use crate::tools::record::{Rec, RecordSummary, Recorder};
+use crate::boards::sensor::{RdtReport, SensorReport};
+use crate::tools::record::{RecordSummary, Recorder};
+use crate::tools::topics::Rec;
 use crate::{ipc, rt};
 use afs_shared::msg::SensorStats;
 use anyhow::{Context, Result, bail};

@@ -12,10 +12,8 @@
 //! Nothing is encoded while no client subscribes to a topic.
 
 use super::follow::{Ended, Follower};
-use super::record::{Rec, TOPICS, json_schema};
+use super::topics::{Rec, TOPICS, json_schema};
 use crate::rt;
-use afs_shared::live::LiveSample;
-use afs_shared::msg::{PlantSample, ServoSample};
 use anyhow::{Context, Result, bail};
 use foxglove::{ChannelBuilder, Context as FoxContext, PartialMetadata, RawChannel, Schema};
 use serde::{Deserialize, Serialize};
@@ -346,15 +344,10 @@ pub fn attach(prefix: &str, settings: ViewSettings, stop: &AtomicBool) -> Result
     Ok(view.finish())
 }
 
-/// The live record of a joined tick, for the sinks that want it.
-pub fn live(p: &PlantSample, s: &ServoSample) -> Option<Rec> {
-    LiveSample::of_tick(p, s).map(Rec::Live)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use afs_shared::msg::WrenchSample;
+    use afs_shared::msg::{PlantSample, ServoSample, WrenchSample};
 
     #[test]
     fn ticks_are_kept_at_the_same_seq_and_force_samples_by_time() {

@@ -468,17 +468,18 @@ pub fn tune_pid_for_bandwidth(
     gains(std::f64::consts::TAU * bandwidth_hz / x)
 }
 
-/// The [`JointServo`]s' state, for a snapshot.
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
-#[type_name("afs::JointServoState")]
-#[repr(C)]
-pub struct JointServoState {
-    /// Integral of the position error per joint (rad·s).
-    pub integral_rad_s: [f64; 2],
-    /// 1 while integrating (0: frozen).
-    pub integrating: u32,
-    /// Reserved (0).
-    pub reserved: u32,
+wire_struct! {
+    /// The [`JointServo`]s' state, for a snapshot.
+    #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+    #[type_name("afs::JointServoState")]
+    pub struct JointServoState {
+        /// Integral of the position error per joint (rad·s).
+        pub integral_rad_s: [f64; 2],
+        /// 1 while integrating (0: frozen).
+        pub integrating: u32,
+        /// Reserved (0).
+        pub reserved: u32,
+    }
 }
 
 /// The two joint PID servos with torque saturation and anti-windup.

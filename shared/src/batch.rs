@@ -145,7 +145,7 @@ pub struct Unpacker {
 impl Unpacker {
     /// Takes a batch; hands each of its samples to `sample`. Returns false for a refused batch.
     pub fn push(&mut self, b: &ServoBatch, mut sample: impl FnMut(&ServoSample)) -> bool {
-        if b.version != crate::msg::VERSION || b.count == 0 || b.count as usize > SERVO_BATCH {
+        if b.version != ServoBatch::VERSION || b.count == 0 || b.count as usize > SERVO_BATCH {
             self.refused += 1;
             return false;
         }

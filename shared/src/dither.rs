@@ -13,22 +13,23 @@ use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
 
-/// A running [`Dither`]'s state, for a snapshot: restored into an oscillator of the same
-/// frequency it continues bit for bit.
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
-#[type_name("afs::DitherState")]
-#[repr(C)]
-pub struct DitherState {
-    /// Phase ωt in [0, 2π) (rad).
-    pub phase_rad: f64,
-    /// Amplitude A (m).
-    pub amplitude_m: f64,
-    /// (sin φ, cos φ) as the rotation recurrence holds them.
-    pub sin_cos: [f64; 2],
-    /// 1 if the last step completed a period.
-    pub wrapped: u32,
-    /// Reserved (0).
-    pub reserved: u32,
+wire_struct! {
+    /// A running [`Dither`]'s state, for a snapshot: restored into an oscillator of the same
+    /// frequency it continues bit for bit.
+    #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+    #[type_name("afs::DitherState")]
+    pub struct DitherState {
+        /// Phase ωt in [0, 2π) (rad).
+        pub phase_rad: f64,
+        /// Amplitude A (m).
+        pub amplitude_m: f64,
+        /// (sin φ, cos φ) as the rotation recurrence holds them.
+        pub sin_cos: [f64; 2],
+        /// 1 if the last step completed a period.
+        pub wrapped: u32,
+        /// Reserved (0).
+        pub reserved: u32,
+    }
 }
 
 /// Dither settings.

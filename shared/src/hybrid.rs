@@ -144,29 +144,30 @@ pub struct HybridCommand {
     pub tangential_force_n: f64,
 }
 
-/// A [`HybridController`]'s state, for a snapshot.
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
-#[type_name("afs::HybridState")]
-#[repr(C)]
-pub struct HybridState {
-    /// Task-frame origin (m, world).
-    pub origin_m: [f64; 2],
-    /// Estimated tangent angle (rad, world).
-    pub tangent_angle_rad: f64,
-    /// Tangential position from the origin (m).
-    pub s_m: f64,
-    /// Nominal tangential velocity (m/s).
-    pub s_dot_m_per_s: f64,
-    /// Requested nominal tangential velocity (m/s).
-    pub velocity_target_m_per_s: f64,
-    /// Normal set-point into the surface from the origin (m).
-    pub depth_m: f64,
-    /// Its rate from the force loop (m/s).
-    pub depth_rate_m_per_s: f64,
-    /// Desired normal force (N).
-    pub preload_n: f64,
-    /// Stiffness of the Hooke's-law update (N/m).
-    pub hooke_stiffness_n_per_m: f64,
+wire_struct! {
+    /// A [`HybridController`]'s state, for a snapshot.
+    #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+    #[type_name("afs::HybridState")]
+    pub struct HybridState {
+        /// Task-frame origin (m, world).
+        pub origin_m: [f64; 2],
+        /// Estimated tangent angle (rad, world).
+        pub tangent_angle_rad: f64,
+        /// Tangential position from the origin (m).
+        pub s_m: f64,
+        /// Nominal tangential velocity (m/s).
+        pub s_dot_m_per_s: f64,
+        /// Requested nominal tangential velocity (m/s).
+        pub velocity_target_m_per_s: f64,
+        /// Normal set-point into the surface from the origin (m).
+        pub depth_m: f64,
+        /// Its rate from the force loop (m/s).
+        pub depth_rate_m_per_s: f64,
+        /// Desired normal force (N).
+        pub preload_n: f64,
+        /// Stiffness of the Hooke's-law update (N/m).
+        pub hooke_stiffness_n_per_m: f64,
+    }
 }
 
 /// Hybrid position/force controller state.

@@ -2,7 +2,7 @@
 #![warn(missing_docs)]
 
 #[macro_use]
-mod wire;
+pub mod wire;
 
 pub mod arm;
 pub mod batch;

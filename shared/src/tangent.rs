@@ -245,23 +245,25 @@ impl ProbePlan {
 /// Marks a hold sample (before the first probe) in [`ProbeSample::probe`].
 pub const HOLD: u8 = u8::MAX;
 
-/// One recorded sample of a probe run (also the payload element of a tangent request).
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize, ZeroCopySend)]
-#[type_name("afs::ProbeSample")]
-#[repr(C)]
-pub struct ProbeSample {
-    /// Time (s).
-    pub t: f64,
-    /// Measured force on the tool, world frame (N).
-    pub force: [f64; 2],
-    /// Tip position from the encoders, world frame (m).
-    pub tip: [f64; 2],
-    /// Stroke phase φ (rad): the commanded displacement is A sin φ.
-    pub phase: f64,
-    /// Probe index, or [`HOLD`].
-    pub probe: u8,
-    /// True during the measured whole periods (false in ramps).
-    pub measured: bool,
+wire_message! {
+    version = 1;
+    /// One recorded sample of a probe run (also the payload element of a tangent request).
+    #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize, ZeroCopySend)]
+    #[type_name("afs::ProbeSample")]
+    pub struct ProbeSample {
+        /// Time (s).
+        pub t: f64,
+        /// Measured force on the tool, world frame (N).
+        pub force: [f64; 2],
+        /// Tip position from the encoders, world frame (m).
+        pub tip: [f64; 2],
+        /// Stroke phase φ (rad): the commanded displacement is A sin φ.
+        pub phase: f64,
+        /// Probe index, or [`HOLD`].
+        pub probe: u8,
+        /// True during the measured whole periods (false in ramps).
+        pub measured: bool,
+    }
 }
 
 /// Statistics of one probe on a given normal direction.

@@ -30,23 +30,24 @@ use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::{Deserialize, Serialize};
 
-/// A [`Tuner`]'s state, for a snapshot (the fields of the configured tuner; the others 0).
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
-#[type_name("afs::TunerState")]
-#[repr(C)]
-pub struct TunerState {
-    /// Aω (m/s).
-    pub a_omega_m_per_s: f64,
-    /// Thesis tuner: the Stribeck velocity estimate (m/s).
-    pub stribeck_velocity_estimate_m_per_s: f64,
-    /// Cost tuner: the measured dither transmission.
-    pub transmission: f64,
-    /// Cost tuner: the friction-level correction.
-    pub friction_scale: f64,
-    /// Thesis tuner: its friction window, in brief.
-    pub window: SlidingSummary,
-    /// Cost tuner: its period window.
-    pub periods: PeriodWindowState,
+wire_struct! {
+    /// A [`Tuner`]'s state, for a snapshot (the fields of the configured tuner; the others 0).
+    #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+    #[type_name("afs::TunerState")]
+    pub struct TunerState {
+        /// Aω (m/s).
+        pub a_omega_m_per_s: f64,
+        /// Thesis tuner: the Stribeck velocity estimate (m/s).
+        pub stribeck_velocity_estimate_m_per_s: f64,
+        /// Cost tuner: the measured dither transmission.
+        pub transmission: f64,
+        /// Cost tuner: the friction-level correction.
+        pub friction_scale: f64,
+        /// Thesis tuner: its friction window, in brief.
+        pub window: SlidingSummary,
+        /// Cost tuner: its period window.
+        pub periods: PeriodWindowState,
+    }
 }
 
 /// Settings of the thesis tuner (a).

@@ -9,7 +9,10 @@
 //! verdict says so and the servo goes to its safe state. Rejected samples never reach the
 //! controller as values; each is counted by kind.
 
-use crate::msg::{VERSION, WrenchSample};
+use crate::msg::WrenchSample;
+use iceoryx2_bb_derive_macros::ZeroCopySend;
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
+use serde::{Deserialize, Serialize};
 
 wire_code! {
     /// Why a sample or a tick was refused. The numbers are the `safe_reason` codes of
@@ -61,25 +64,62 @@ impl Default for GateParams {
     }
 }
 
-/// Counts of refused samples, by kind.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct GateCounters {
-    /// [`Verdict::NonFinite`].
-    pub non_finite: u64,
-    /// [`Verdict::OutOfRange`].
-    pub out_of_range: u64,
-    /// [`Verdict::SeqRepeat`].
-    pub seq_repeat: u64,
-    /// [`Verdict::SeqBackwards`].
-    pub seq_backwards: u64,
-    /// [`Verdict::Future`].
-    pub future: u64,
-    /// [`Verdict::Version`].
-    pub version: u64,
-    /// Accepted samples.
-    pub accepted: u64,
-    /// Sensor restarts seen (new epochs).
-    pub new_epochs: u64,
+wire_struct! {
+    /// Counts of offered samples by verdict. It crosses a servo restart in the world snapshot and
+    /// goes out in the loop statistics (`#[repr(C)]`, docs/messages.md).
+    #[derive(
+        Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend, Serialize, Deserialize,
+    )]
+    #[type_name("afs::GateCounters")]
+    pub struct GateCounters {
+        /// [`Verdict::NonFinite`].
+        pub non_finite: u64,
+        /// [`Verdict::OutOfRange`].
+        pub out_of_range: u64,
+        /// [`Verdict::SeqRepeat`].
+        pub seq_repeat: u64,
+        /// [`Verdict::SeqBackwards`].
+        pub seq_backwards: u64,
+        /// [`Verdict::Future`].
+        pub future: u64,
+        /// [`Verdict::Version`].
+        pub version: u64,
+        /// Accepted samples.
+        pub accepted: u64,
+        /// Sensor restarts seen (new epochs).
+        pub new_epochs: u64,
+    }
+}
+
+impl GateCounters {
+    /// One more sample judged `v` (a tick's verdicts, `Stale` and `NoData`, are not counted).
+    pub fn count(&mut self, v: Verdict) {
+        match v {
+            Verdict::Ok => self.accepted += 1,
+            Verdict::NonFinite => self.non_finite += 1,
+            Verdict::OutOfRange => self.out_of_range += 1,
+            Verdict::SeqRepeat => self.seq_repeat += 1,
+            Verdict::SeqBackwards => self.seq_backwards += 1,
+            Verdict::Future => self.future += 1,
+            Verdict::Version => self.version += 1,
+            Verdict::Stale | Verdict::NoData => {}
+        }
+    }
+
+    /// Samples refused, whatever the reason.
+    pub fn refused(&self) -> u64 {
+        self.non_finite
+            + self.out_of_range
+            + self.seq_repeat
+            + self.seq_backwards
+            + self.future
+            + self.version
+    }
+
+    /// Samples judged (accepted or refused).
+    pub fn judged(&self) -> u64 {
+        self.accepted + self.refused()
+    }
 }
 
 /// The gate.
@@ -100,31 +140,30 @@ impl SampleGate {
         }
     }
 
+    /// A gate that goes on counting from `counters` (a restarted servo's, from its
+    /// predecessor's snapshot); the newest sample is not carried over.
+    pub fn resume(params: GateParams, counters: GateCounters) -> Self {
+        Self {
+            counters,
+            ..Self::new(params)
+        }
+    }
+
     /// Offers a received sample at monotonic time `now_ns`; returns the verdict.
     pub fn offer(&mut self, s: &WrenchSample, now_ns: u64) -> Verdict {
         let v = self.judge(s, now_ns);
-        let c = &mut self.counters;
-        match v {
-            Verdict::Ok => {
-                c.accepted += 1;
-                if self.newest.is_some_and(|n| s.epoch_ns > n.epoch_ns) {
-                    c.new_epochs += 1;
-                }
-                self.newest = Some(*s);
+        self.counters.count(v);
+        if v == Verdict::Ok {
+            if self.newest.is_some_and(|n| s.epoch_ns > n.epoch_ns) {
+                self.counters.new_epochs += 1;
             }
-            Verdict::NonFinite => c.non_finite += 1,
-            Verdict::OutOfRange => c.out_of_range += 1,
-            Verdict::SeqRepeat => c.seq_repeat += 1,
-            Verdict::SeqBackwards => c.seq_backwards += 1,
-            Verdict::Future => c.future += 1,
-            Verdict::Version => c.version += 1,
-            Verdict::Stale | Verdict::NoData => {}
+            self.newest = Some(*s);
         }
         v
     }
 
     fn judge(&self, s: &WrenchSample, now_ns: u64) -> Verdict {
-        if s.version != VERSION {
+        if s.version != WrenchSample::VERSION {
             return Verdict::Version;
         }
         let values = [s.force_n[0], s.force_n[1], s.torque_nm];
@@ -190,7 +229,7 @@ mod tests {
 
     fn sample(seq: u64, t: u64) -> WrenchSample {
         WrenchSample {
-            version: VERSION,
+            version: WrenchSample::VERSION,
             seq,
             epoch_ns: 1_000,
             sample_ns: t,

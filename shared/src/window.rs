@@ -11,39 +11,41 @@ use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
 
-/// A [`SlidingWindow`] in brief, for a snapshot: how many samples it holds, their mean and
-/// their variance. Restoring refills the window with samples of that mean and (nearly) that
-/// variance, so both carry on and the samples themselves are forgotten: they are replaced as
-/// new ones come, one window later.
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
-#[type_name("afs::SlidingSummary")]
-#[repr(C)]
-pub struct SlidingSummary {
-    /// Samples held.
-    pub len: u64,
-    /// Their mean.
-    pub mean: f64,
-    /// Their variance.
-    pub variance: f64,
+wire_struct! {
+    /// A [`SlidingWindow`] in brief, for a snapshot: how many samples it holds, their mean and
+    /// their variance. Restoring refills the window with samples of that mean and (nearly) that
+    /// variance, so both carry on and the samples themselves are forgotten: they are replaced as
+    /// new ones come, one window later.
+    #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+    #[type_name("afs::SlidingSummary")]
+    pub struct SlidingSummary {
+        /// Samples held.
+        pub len: u64,
+        /// Their mean.
+        pub mean: f64,
+        /// Their variance.
+        pub variance: f64,
+    }
 }
 
 /// The sums of one dither period of a [`PeriodWindow`], in the order of its fields (samples,
 /// force, force², velocity, velocity·cos φ, velocity·sin φ, normal force, commanded Aω).
 pub type PeriodSumsState = [f64; 8];
 
-/// A [`PeriodWindow`]'s whole state, for a snapshot.
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
-#[type_name("afs::PeriodWindowState")]
-#[repr(C)]
-pub struct PeriodWindowState {
-    /// The period in progress.
-    pub current: PeriodSumsState,
-    /// The finished periods (ring).
-    pub ring: [PeriodSumsState; MAX_PERIODS],
-    /// Finished periods held.
-    pub filled: u32,
-    /// Next ring slot.
-    pub head: u32,
+wire_struct! {
+    /// A [`PeriodWindow`]'s whole state, for a snapshot.
+    #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+    #[type_name("afs::PeriodWindowState")]
+    pub struct PeriodWindowState {
+        /// The period in progress.
+        pub current: PeriodSumsState,
+        /// The finished periods (ring).
+        pub ring: [PeriodSumsState; MAX_PERIODS],
+        /// Finished periods held.
+        pub filled: u32,
+        /// Next ring slot.
+        pub head: u32,
+    }
 }
 
 /// Mean and variance over the last `capacity` samples.

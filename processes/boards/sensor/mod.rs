@@ -8,13 +8,16 @@ pub mod model;
 pub mod rdt;
 
 use crate::boards::Startup;
+use crate::hist::QuantilesUs;
 use crate::ipc::{self, Svc};
 use crate::rt;
-use afs_shared::msg::{self, SensorSource, SensorStats, WrenchSample};
+use afs_shared::msg::{SensorSource, SensorStats, WrenchSample};
 use afs_shared::sensor::SensorParams;
 use anyhow::{Context, Result};
 use iceoryx2::node::Node;
 use iceoryx2::port::publisher::Publisher;
+use serde::{Deserialize, Serialize};
+use std::fmt;
 use std::sync::atomic::AtomicBool;
 
 /// The wrench publisher every source (and `afs sensor`) publishes on: a slow subscriber loses
@@ -56,7 +59,7 @@ impl StatsOut {
                 .context("sensor statistics publisher")?,
             next_ns: 0,
             stats: SensorStats {
-                version: msg::VERSION,
+                version: SensorStats::VERSION,
                 source: source.into(),
                 ..Default::default()
             },
@@ -127,5 +130,98 @@ pub fn run(args: &SensorArgs, stop: &AtomicBool) -> Result<SensorSummary> {
     match &args.source {
         Source::Model => model::run(args, stop),
         Source::Rdt(settings) => rdt::run_board(args, settings, stop),
+    }
+}
+
+/// What an RDT device sent (`SensorStats`' `rdt_*` fields, times in µs).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct RdtReport {
+    /// Datagrams received.
+    pub datagrams: u64,
+    /// Datagrams that were not whole records.
+    pub bad_datagrams: u64,
+    /// Records received.
+    pub records: u64,
+    /// Records missing from the stream.
+    pub lost: u64,
+    /// Records received twice.
+    pub repeated: u64,
+    /// Records older than one received before.
+    pub reordered: u64,
+    /// Records later than the late limit.
+    pub late: u64,
+    /// Records with a non-zero status word.
+    pub status_errors: u64,
+    /// The last non-zero status word.
+    pub last_status: u32,
+    /// Records arriving when last reported.
+    pub streaming: bool,
+    /// Streaming requests sent.
+    pub requests: u64,
+    /// Time between datagrams (µs).
+    pub interval_us: QuantilesUs,
+    /// Excess delay of the records over the least-delayed one (µs).
+    pub excess_delay_us: QuantilesUs,
+}
+
+/// The sensor board's statistics (`SensorStats`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SensorReport {
+    /// Where its samples came from.
+    pub source: SensorSource,
+    /// Samples published.
+    pub published: u64,
+    /// Model: periods that woke a whole period late.
+    pub late_periods: u64,
+    /// RDT: what the device sent (None for the model).
+    pub rdt: Option<RdtReport>,
+}
+
+impl From<&SensorStats> for SensorReport {
+    fn from(s: &SensorStats) -> Self {
+        let source = SensorSource::try_from(s.source).unwrap_or(SensorSource::Model);
+        Self {
+            source,
+            published: s.published,
+            late_periods: s.late_periods,
+            rdt: (source == SensorSource::Rdt).then(|| RdtReport {
+                datagrams: s.rdt_datagrams,
+                bad_datagrams: s.rdt_bad_datagrams,
+                records: s.rdt_records,
+                lost: s.rdt_lost,
+                repeated: s.rdt_repeated,
+                reordered: s.rdt_reordered,
+                late: s.rdt_late,
+                status_errors: s.rdt_status_errors,
+                last_status: s.rdt_last_status,
+                streaming: s.rdt_streaming != 0,
+                requests: s.rdt_requests,
+                interval_us: (&s.rdt_interval).into(),
+                excess_delay_us: (&s.rdt_excess_delay).into(),
+            }),
+        }
+    }
+}
+
+impl fmt::Display for RdtReport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{} records in {} datagrams ({} not RDT); lost {}, repeated {}, reordered {}, late {}, bad status {}; {} requests; interval p50/p99/max {:.1}/{:.1}/{:.1} µs; excess delay p99/max {:.1}/{:.1} µs",
+            self.records,
+            self.datagrams,
+            self.bad_datagrams,
+            self.lost,
+            self.repeated,
+            self.reordered,
+            self.late,
+            self.status_errors,
+            self.requests,
+            self.interval_us.p50,
+            self.interval_us.p99,
+            self.interval_us.max,
+            self.excess_delay_us.p99,
+            self.excess_delay_us.max,
+        )
     }
 }

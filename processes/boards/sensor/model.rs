@@ -10,7 +10,7 @@ use super::{SensorArgs, SensorSummary, StatsOut};
 use crate::boards::Startup;
 use crate::ipc;
 use crate::rt;
-use afs_shared::msg::{self, Board, PlantSample, SensorSource, WrenchFlags, WrenchSample};
+use afs_shared::msg::{Board, PlantSample, SensorSource, WrenchFlags, WrenchSample};
 use afs_shared::sensor::SensorModel;
 use anyhow::{Context, Result};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -55,7 +55,7 @@ pub fn run(args: &SensorArgs, stop: &AtomicBool) -> Result<SensorSummary> {
         }
         while let Ok(Some(s)) = plant_sub.receive() {
             let p = *s.payload();
-            if p.version == msg::VERSION && latest.is_none_or(|l| p.seq >= l.seq) {
+            if p.version == PlantSample::VERSION && latest.is_none_or(|l| p.seq >= l.seq) {
                 latest = Some(p);
             }
         }
@@ -69,7 +69,7 @@ pub fn run(args: &SensorArgs, stop: &AtomicBool) -> Result<SensorSummary> {
             }
             let r = model.sample(p.sensor_wrench());
             let mut w = WrenchSample {
-                version: msg::VERSION,
+                version: WrenchSample::VERSION,
                 flags: if r.saturated {
                     WrenchFlags::SATURATED
                 } else {
@@ -101,11 +101,7 @@ pub fn run(args: &SensorArgs, stop: &AtomicBool) -> Result<SensorSummary> {
             // the connections of subscribers that died only when asked.
             startup.update_connections();
         }
-        deadline += period_ns;
-        let now2 = rt::monotonic_ns();
-        if now2 > deadline + 100 * period_ns {
-            deadline = now2 + period_ns;
-        }
+        deadline = rt::next_deadline(deadline, period_ns, rt::monotonic_ns());
     }
     Ok(summary)
 }

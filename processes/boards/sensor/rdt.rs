@@ -10,7 +10,7 @@
 use super::{SensorArgs, SensorSummary, StatsOut};
 use crate::boards::Startup;
 use crate::{hist, ipc, rt};
-use afs_shared::msg::{self, Board, SensorSource, SensorStats, WrenchFlags, WrenchSample};
+use afs_shared::msg::{Board, SensorSource, SensorStats, WrenchFlags, WrenchSample};
 use afs_shared::rdt::{
     Calibration, Command, Lateness, MAX_RECORDS_PER_PACKET, Mounting, RECORD_LEN, Record, Request,
     SequenceTracker, Verdict, status_healthy,
@@ -136,7 +136,7 @@ impl Receiver {
             biased: false,
             buf: Box::new([0; RECORD_LEN * MAX_RECORDS_PER_PACKET + 1]),
             stats: SensorStats {
-                version: msg::VERSION,
+                version: SensorStats::VERSION,
                 source: SensorSource::Rdt.into(),
                 ..Default::default()
             },
@@ -264,7 +264,7 @@ impl Receiver {
             let w = self.settings.mounting.planar(&six);
             let saturated = r.counts.iter().any(|c| *c == i32::MAX || *c == i32::MIN);
             let sample = WrenchSample {
-                version: msg::VERSION,
+                version: WrenchSample::VERSION,
                 flags: if saturated {
                     WrenchFlags::SATURATED
                 } else {

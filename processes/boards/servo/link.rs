@@ -9,7 +9,7 @@
 
 use crate::ipc::{self, Svc};
 use crate::rt;
-use afs_shared::msg::{self, TangentRequestHeader, TangentResponse};
+use afs_shared::msg::{TangentRequestHeader, TangentResponse};
 use afs_shared::servo::{ServoCore, ServoMode};
 use afs_shared::tangent::ProbeSample;
 use iceoryx2::pending_response::PendingResponse;
@@ -205,7 +205,7 @@ impl EstimatorLink {
                     Some(mut loan) => {
                         let tangent = servo.params().tangent;
                         *loan.header_mut() = TangentRequestHeader {
-                            version: msg::VERSION,
+                            version: TangentRequestHeader::VERSION,
                             reprobe: u32::from(req.reprobe),
                             request_id: self.request_id,
                             attempt: self.attempt,

@@ -49,17 +49,11 @@ pub(super) fn publish_stats(
     servo: &ServoCore,
     publisher: &iceoryx2::port::publisher::Publisher<Svc, LoopStats, ()>,
 ) {
-    let c = gate.counters();
     stats.seq += 1;
     stats.wake_latency = quantiles(&timing.wake);
     stats.exec = quantiles(&timing.exec);
     stats.force_age = quantiles(&timing.age);
-    stats.bad_non_finite = c.non_finite;
-    stats.bad_out_of_range = c.out_of_range;
-    stats.bad_seq_repeat = c.seq_repeat;
-    stats.bad_seq_backwards = c.seq_backwards;
-    stats.bad_future = c.future;
-    stats.bad_version = c.version;
+    stats.gate = gate.counters();
     stats.safe_entries = servo.counters().safe_entries as u64;
     stats.requests = link.requests;
     stats.retries = link.retries;

@@ -17,7 +17,7 @@ use super::stack::{StackRun, run_stack};
 use super::{BenchOptions, Series, finish_part};
 use crate::hist;
 use crate::ipc;
-use crate::supervisor::{DEFAULT_STACK, resolve_binary};
+use crate::stack::{DEFAULT_STACK, resolve_binary};
 use afs_shared::batch::SeqGaps;
 use afs_shared::check::Check;
 use afs_shared::msg::{TangentRequestHeader, TangentResponse};

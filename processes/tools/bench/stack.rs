@@ -4,7 +4,8 @@
 use super::transport::pin_thread;
 use super::{BenchOptions, ConstFloor, PartReport, Series, finish_part};
 use crate::hist::{self, QuantilesUs};
-use crate::supervisor::{DEFAULT_STACK, RunReport, StackFile};
+use crate::stack::{DEFAULT_STACK, StackFile};
+use crate::supervisor::RunReport;
 use crate::{ipc, rt};
 use afs_shared::check::Check;
 use afs_shared::msg::Board;
@@ -354,7 +355,7 @@ enum Kind {
 fn viewer(addr: &str, cpu: usize, running: &AtomicBool) -> u64 {
     // Where an operator's viewer runs: not on the servo's core.
     pin_thread(cpu);
-    use crate::tools::record::TOPICS;
+    use crate::tools::topics::TOPICS;
     use crate::tools::view_client::ViewClient;
     let all: Vec<&str> = TOPICS.iter().map(|t| t.0).collect();
     let url = format!("ws://{addr}");

@@ -3,7 +3,7 @@
 
 use crate::ipc::{self, Svc};
 use crate::rt;
-use afs_shared::msg::{ServoSample, VERSION, WrenchSample};
+use afs_shared::msg::{ServoSample, WrenchSample};
 use afs_shared::watchdog::{GateParams, SampleGate};
 use anyhow::{Context, Result, bail};
 use iceoryx2::port::listener::Listener;
@@ -256,7 +256,7 @@ pub(super) fn ping(
         }
         Transport::AfsPoll | Transport::AfsEvent => {
             let w = WrenchSample {
-                version: VERSION,
+                version: WrenchSample::VERSION,
                 seq,
                 sample_ns: t0,
                 publish_ns: t0,
@@ -432,7 +432,7 @@ pub fn peer(prefix: &str, socket: &Path, cpu: Option<usize>) -> Result<()> {
                     // What the servo does with a sample on receipt.
                     let _ = gate.offer(&w, now);
                     let s = ServoSample {
-                        version: VERSION,
+                        version: ServoSample::VERSION,
                         seq: w.seq,
                         force_age_ns: now.saturating_sub(w.publish_ns),
                         ..Default::default()

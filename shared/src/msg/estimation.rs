@@ -1,7 +1,6 @@
 //! The estimator's services: tangent and rotation-centre requests and responses, and the
 //! conversions to and from the core's types, so that both ends use the same code.
 
-use super::VERSION;
 use crate::error::ConfigError;
 use crate::tangent::{
     MAX_PROBES, ProbePlan, ReprobeReason, TangentError, TangentEstimate, TangentMethod,
@@ -11,37 +10,38 @@ use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
 
-/// The tangent estimator's settings, as sent with each request (the estimator is stateless).
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
-#[type_name("afs::TangentParamsMsg")]
-#[repr(C)]
-pub struct TangentParamsMsg {
-    /// Whole periods per probe.
-    pub periods: u32,
-    /// Padding (0).
-    pub reserved: u32,
-    /// [`TangentParams::probe_angles_deg`].
-    pub probe_angles_deg: [f64; 2],
-    /// [`TangentParams::reprobe_angles_deg`].
-    pub reprobe_angles_deg: [f64; 2],
-    /// [`TangentParams::amplitude_m`].
-    pub amplitude_m: f64,
-    /// [`TangentParams::frequency_hz`].
-    pub frequency_hz: f64,
-    /// [`TangentParams::ramp_s`].
-    pub ramp_s: f64,
-    /// [`TangentParams::settle_s`].
-    pub settle_s: f64,
-    /// [`TangentParams::sign_threshold`].
-    pub sign_threshold: f64,
-    /// [`TangentParams::equal_threshold`].
-    pub equal_threshold: f64,
-    /// [`TangentParams::max_std_error_deg`].
-    pub max_std_error_deg: f64,
-    /// [`TangentParams::contact_loss_fraction`].
-    pub contact_loss_fraction: f64,
-    /// [`TangentParams::noise_std_n`].
-    pub noise_std_n: f64,
+wire_struct! {
+    /// The tangent estimator's settings, as sent with each request (the estimator is stateless).
+    #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+    #[type_name("afs::TangentParamsMsg")]
+    pub struct TangentParamsMsg {
+        /// Whole periods per probe.
+        pub periods: u32,
+        /// Padding (0).
+        pub reserved: u32,
+        /// [`TangentParams::probe_angles_deg`].
+        pub probe_angles_deg: [f64; 2],
+        /// [`TangentParams::reprobe_angles_deg`].
+        pub reprobe_angles_deg: [f64; 2],
+        /// [`TangentParams::amplitude_m`].
+        pub amplitude_m: f64,
+        /// [`TangentParams::frequency_hz`].
+        pub frequency_hz: f64,
+        /// [`TangentParams::ramp_s`].
+        pub ramp_s: f64,
+        /// [`TangentParams::settle_s`].
+        pub settle_s: f64,
+        /// [`TangentParams::sign_threshold`].
+        pub sign_threshold: f64,
+        /// [`TangentParams::equal_threshold`].
+        pub equal_threshold: f64,
+        /// [`TangentParams::max_std_error_deg`].
+        pub max_std_error_deg: f64,
+        /// [`TangentParams::contact_loss_fraction`].
+        pub contact_loss_fraction: f64,
+        /// [`TangentParams::noise_std_n`].
+        pub noise_std_n: f64,
+    }
 }
 
 impl From<&TangentParams> for TangentParamsMsg {
@@ -86,27 +86,28 @@ impl TangentParamsMsg {
     }
 }
 
-/// A probe plan on the wire.
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
-#[type_name("afs::ProbePlanMsg")]
-#[repr(C)]
-pub struct ProbePlanMsg {
-    /// Number of probes (≤ 6).
-    pub count: u32,
-    /// Whole periods per probe.
-    pub periods: u32,
-    /// Offsets δα_i from the estimated tangent (rad).
-    pub offsets_rad: [f64; MAX_PROBES],
-    /// Stroke amplitude (m).
-    pub amplitude_m: f64,
-    /// Stroke frequency (Hz).
-    pub frequency_hz: f64,
-    /// Ramp in and out (s).
-    pub ramp_s: f64,
-    /// Hold before the first probe (s).
-    pub settle_s: f64,
-    /// Friction-suppression dither frequency during the strokes (Hz, 0: none).
-    pub dither_hz: f64,
+wire_struct! {
+    /// A probe plan on the wire.
+    #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+    #[type_name("afs::ProbePlanMsg")]
+    pub struct ProbePlanMsg {
+        /// Number of probes (≤ 6).
+        pub count: u32,
+        /// Whole periods per probe.
+        pub periods: u32,
+        /// Offsets δα_i from the estimated tangent (rad).
+        pub offsets_rad: [f64; MAX_PROBES],
+        /// Stroke amplitude (m).
+        pub amplitude_m: f64,
+        /// Stroke frequency (Hz).
+        pub frequency_hz: f64,
+        /// Ramp in and out (s).
+        pub ramp_s: f64,
+        /// Hold before the first probe (s).
+        pub settle_s: f64,
+        /// Friction-suppression dither frequency during the strokes (Hz, 0: none).
+        pub dither_hz: f64,
+    }
 }
 
 impl From<&ProbePlan> for ProbePlanMsg {
@@ -153,29 +154,31 @@ impl ProbePlanMsg {
     }
 }
 
-/// Header of a tangent-estimation request; the payload is the `[ProbeSample]` record.
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
-#[type_name("afs::TangentRequestHeader")]
-#[repr(C)]
-pub struct TangentRequestHeader {
-    /// [`VERSION`](super::VERSION).
-    pub version: u32,
-    /// 1 when the record is a re-probe set.
-    pub reprobe: u32,
-    /// Identifies the estimation; the same for its retries.
-    pub request_id: u64,
-    /// 0 for the first send, then 1, 2, … for retries.
-    pub attempt: u32,
-    /// Padding (0).
-    pub reserved: u32,
-    /// Monotonic time of sending (ns).
-    pub publish_ns: u64,
-    /// The estimated tangent angle the offsets refer to (rad, world).
-    pub base_angle_rad: f64,
-    /// The probes that ran.
-    pub plan: ProbePlanMsg,
-    /// The estimator's settings.
-    pub params: TangentParamsMsg,
+wire_message! {
+    version = 1;
+    /// Header of a tangent-estimation request; the payload is the `[ProbeSample]` record.
+    #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+    #[type_name("afs::TangentRequestHeader")]
+    pub struct TangentRequestHeader {
+        /// The layout version, `Self::VERSION` (docs/messages.md).
+        pub version: u32,
+        /// 1 when the record is a re-probe set.
+        pub reprobe: u32,
+        /// Identifies the estimation; the same for its retries.
+        pub request_id: u64,
+        /// 0 for the first send, then 1, 2, … for retries.
+        pub attempt: u32,
+        /// Padding (0).
+        pub reserved: u32,
+        /// Monotonic time of sending (ns).
+        pub publish_ns: u64,
+        /// The estimated tangent angle the offsets refer to (rad, world).
+        pub base_angle_rad: f64,
+        /// The probes that ran.
+        pub plan: ProbePlanMsg,
+        /// The estimator's settings.
+        pub params: TangentParamsMsg,
+    }
 }
 
 wire_code! {
@@ -228,51 +231,53 @@ wire_code! {
     }
 }
 
-/// The estimator's answer.
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
-#[type_name("afs::TangentResponse")]
-#[repr(C)]
-pub struct TangentResponse {
-    /// [`VERSION`](super::VERSION).
-    pub version: u32,
-    /// [`Outcome`] as its code.
-    pub outcome: u32,
-    /// The request's id.
-    pub request_id: u64,
-    /// Monotonic time of the answer (ns).
-    pub publish_ns: u64,
-    /// [`ResponseCode`] of a re-probe or failure (0 otherwise).
-    pub code: u32,
-    /// [`MethodCode`] of an estimate.
-    pub method: u32,
-    /// Probes used.
-    pub probes: u32,
-    /// Re-projection iterations.
-    pub iterations: u32,
-    /// α0 = estimated − true tangent (rad).
-    pub alpha0_rad: f64,
-    /// Corrected tangent angle (rad, world).
-    pub tangent_angle_rad: f64,
-    /// Standard error of α0 (rad).
-    pub std_error_rad: f64,
-    /// Residual RMS (N).
-    pub residual_n: f64,
-    /// Noise of the in-phase responses (N).
-    pub noise_n: f64,
-    /// Signal-to-noise ratio.
-    pub snr: f64,
-    /// Effective contact stiffness (N/m).
-    pub stiffness_n_per_m: f64,
-    /// Thesis eq. 5.8 cross-check (rad, NaN if none).
-    pub thesis_alpha0_rad: f64,
-    /// Eq. 6.1 cross-check (rad, NaN if none).
-    pub thesis_6_1_alpha0_rad: f64,
-    /// Signed-ratio cross-check (rad, NaN if none).
-    pub ratio_alpha0_rad: f64,
-    /// The two numbers of an error (e.g. probe and force for contact lost).
-    pub error_values: [f64; 2],
-    /// The re-probe plan.
-    pub plan: ProbePlanMsg,
+wire_message! {
+    version = 1;
+    /// The estimator's answer.
+    #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+    #[type_name("afs::TangentResponse")]
+    pub struct TangentResponse {
+        /// The layout version, `Self::VERSION` (docs/messages.md).
+        pub version: u32,
+        /// [`Outcome`] as its code.
+        pub outcome: u32,
+        /// The request's id.
+        pub request_id: u64,
+        /// Monotonic time of the answer (ns).
+        pub publish_ns: u64,
+        /// [`ResponseCode`] of a re-probe or failure (0 otherwise).
+        pub code: u32,
+        /// [`MethodCode`] of an estimate.
+        pub method: u32,
+        /// Probes used.
+        pub probes: u32,
+        /// Re-projection iterations.
+        pub iterations: u32,
+        /// α0 = estimated − true tangent (rad).
+        pub alpha0_rad: f64,
+        /// Corrected tangent angle (rad, world).
+        pub tangent_angle_rad: f64,
+        /// Standard error of α0 (rad).
+        pub std_error_rad: f64,
+        /// Residual RMS (N).
+        pub residual_n: f64,
+        /// Noise of the in-phase responses (N).
+        pub noise_n: f64,
+        /// Signal-to-noise ratio.
+        pub snr: f64,
+        /// Effective contact stiffness (N/m).
+        pub stiffness_n_per_m: f64,
+        /// Thesis eq. 5.8 cross-check (rad, NaN if none).
+        pub thesis_alpha0_rad: f64,
+        /// Eq. 6.1 cross-check (rad, NaN if none).
+        pub thesis_6_1_alpha0_rad: f64,
+        /// Signed-ratio cross-check (rad, NaN if none).
+        pub ratio_alpha0_rad: f64,
+        /// The two numbers of an error (e.g. probe and force for contact lost).
+        pub error_values: [f64; 2],
+        /// The re-probe plan.
+        pub plan: ProbePlanMsg,
+    }
 }
 
 impl From<ReprobeReason> for ResponseCode {
@@ -327,7 +332,7 @@ impl TangentResponse {
     /// The wire form of an outcome.
     pub fn from_outcome(request_id: u64, o: &TangentOutcome) -> Self {
         let mut r = Self {
-            version: VERSION,
+            version: Self::VERSION,
             request_id,
             thesis_alpha0_rad: f64::NAN,
             thesis_6_1_alpha0_rad: f64::NAN,
@@ -384,7 +389,7 @@ impl TangentResponse {
     /// A refusal of a malformed request.
     pub fn bad_request(request_id: u64) -> Self {
         Self {
-            version: VERSION,
+            version: Self::VERSION,
             outcome: Outcome::BadRequest.into(),
             request_id,
             ..Default::default()
@@ -393,7 +398,7 @@ impl TangentResponse {
 
     /// Back to the core's outcome; `None` for a bad request or a malformed answer.
     pub fn to_outcome(&self) -> Option<TangentOutcome> {
-        if self.version != VERSION {
+        if self.version != Self::VERSION {
             return None;
         }
         let count = |v: f64| {
@@ -456,68 +461,74 @@ impl TangentResponse {
     }
 }
 
-/// One wrench sample of a rotational dither (rotation-centre request payload).
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
-#[type_name("afs::RotationSample")]
-#[repr(C)]
-pub struct RotationSample {
-    /// Time (s).
-    pub t: f64,
-    /// Dither phase φ (rad): the commanded rotation is A sin φ.
-    pub phase: f64,
-    /// Measured force (N, world).
-    pub force_n: [f64; 2],
-    /// Which dither centre (index into the header's centres).
-    pub dither: u32,
-    /// Padding (0).
-    pub reserved: u32,
+wire_message! {
+    version = 1;
+    /// One wrench sample of a rotational dither (rotation-centre request payload).
+    #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+    #[type_name("afs::RotationSample")]
+    pub struct RotationSample {
+        /// Time (s).
+        pub t: f64,
+        /// Dither phase φ (rad): the commanded rotation is A sin φ.
+        pub phase: f64,
+        /// Measured force (N, world).
+        pub force_n: [f64; 2],
+        /// Which dither centre (index into the header's centres).
+        pub dither: u32,
+        /// Padding (0).
+        pub reserved: u32,
+    }
 }
 
 /// Most dither centres a rotation request can carry.
 pub const MAX_CENTRES: usize = 6;
 
-/// Header of a rotation-centre request; the payload is `[RotationSample]`.
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
-#[type_name("afs::RotationRequestHeader")]
-#[repr(C)]
-pub struct RotationRequestHeader {
-    /// [`VERSION`](super::VERSION).
-    pub version: u32,
-    /// Number of dither centres (3 to 6).
-    pub centres: u32,
-    /// Request id.
-    pub request_id: u64,
-    /// Monotonic time of sending (ns).
-    pub publish_ns: u64,
-    /// Dither centres (m, world).
-    pub centre_m: [[f64; 2]; MAX_CENTRES],
-    /// Dither amplitude (rad).
-    pub amplitude_rad: f64,
-    /// Friction-suppression dither superposed (Hz, 0: none), removed before the lock-in.
-    pub suppression_hz: f64,
+wire_message! {
+    version = 1;
+    /// Header of a rotation-centre request; the payload is `[RotationSample]`.
+    #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+    #[type_name("afs::RotationRequestHeader")]
+    pub struct RotationRequestHeader {
+        /// The layout version, `Self::VERSION` (docs/messages.md).
+        pub version: u32,
+        /// Number of dither centres (3 to 6).
+        pub centres: u32,
+        /// Request id.
+        pub request_id: u64,
+        /// Monotonic time of sending (ns).
+        pub publish_ns: u64,
+        /// Dither centres (m, world).
+        pub centre_m: [[f64; 2]; MAX_CENTRES],
+        /// Dither amplitude (rad).
+        pub amplitude_rad: f64,
+        /// Friction-suppression dither superposed (Hz, 0: none), removed before the lock-in.
+        pub suppression_hz: f64,
+    }
 }
 
-/// The rotation-centre answer.
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
-#[type_name("afs::RotationResponse")]
-#[repr(C)]
-pub struct RotationResponse {
-    /// [`VERSION`](super::VERSION).
-    pub version: u32,
-    /// [`Outcome`] as its code: estimate, failed (singular or too few samples), bad request.
-    pub outcome: u32,
-    /// The request's id.
-    pub request_id: u64,
-    /// Monotonic time of the answer (ns).
-    pub publish_ns: u64,
-    /// Instantaneous centre of rotation P (m, world).
-    pub centre_m: [f64; 2],
-    /// The thesis's unsigned form (NaN if it found none).
-    pub thesis_centre_m: [f64; 2],
-    /// Fitted response matrix A = ∂g/∂c, row-major (N per m per rad).
-    pub response_matrix: [f64; 4],
-    /// |diagonal| / |off-diagonal| of A.
-    pub coupling: f64,
+wire_message! {
+    version = 1;
+    /// The rotation-centre answer.
+    #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+    #[type_name("afs::RotationResponse")]
+    pub struct RotationResponse {
+        /// The layout version, `Self::VERSION` (docs/messages.md).
+        pub version: u32,
+        /// [`Outcome`] as its code: estimate, failed (singular or too few samples), bad request.
+        pub outcome: u32,
+        /// The request's id.
+        pub request_id: u64,
+        /// Monotonic time of the answer (ns).
+        pub publish_ns: u64,
+        /// Instantaneous centre of rotation P (m, world).
+        pub centre_m: [f64; 2],
+        /// The thesis's unsigned form (NaN if it found none).
+        pub thesis_centre_m: [f64; 2],
+        /// Fitted response matrix A = ∂g/∂c, row-major (N per m per rad).
+        pub response_matrix: [f64; 4],
+        /// |diagonal| / |off-diagonal| of A.
+        pub coupling: f64,
+    }
 }
 
 #[cfg(test)]

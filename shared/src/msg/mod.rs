@@ -25,9 +25,6 @@ pub use samples::*;
 pub use status::*;
 pub use world::*;
 
-/// Layout version of every message; a reader refuses other versions.
-pub const VERSION: u32 = 1;
-
 /// Service names. Stacks are isolated by the iceoryx2 file prefix (`afs_<prefix>_`), not by the
 /// names, so a client opens these names with the stack's config.
 pub mod service {

@@ -1,6 +1,5 @@
 //! The per-tick samples (world, force, controller) and the servo's commands.
 
-use super::VERSION;
 use crate::ident::IdentTick;
 use crate::plant::PlantTruth;
 use crate::sensor::Wrench;
@@ -9,58 +8,60 @@ use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
 
-/// The world, every servo tick: what the plant simulation knows and the controller does not.
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
-#[type_name("afs::PlantSample")]
-#[repr(C)]
-pub struct PlantSample {
-    /// [`VERSION`](super::VERSION).
-    pub version: u32,
-    /// Number of contacts (0, 1, 2).
-    pub contact_count: u32,
-    /// Servo tick index since the world started.
-    pub seq: u64,
-    /// Monotonic time the tick woke (ns).
-    pub tick_ns: u64,
-    /// Monotonic time of publication (ns).
-    pub publish_ns: u64,
-    /// Simulated time (s).
-    pub time_s: f64,
-    /// Joint angles (rad).
-    pub q_rad: [f64; 2],
-    /// Joint rates (rad/s).
-    pub qd_rad_per_s: [f64; 2],
-    /// Tool tip (m, world).
-    pub tip_m: [f64; 2],
-    /// Tool tip velocity (m/s, world).
-    pub tip_velocity_m_per_s: [f64; 2],
-    /// Total contact force on the tool (N, world).
-    pub contact_force_n: [f64; 2],
-    /// Force the sensor feels (N, sensor frame: x along link 2).
-    pub sensor_force_n: [f64; 2],
-    /// Moment the sensor feels (N·m).
-    pub sensor_torque_nm: f64,
-    /// Sum of normal pushes (N).
-    pub normal_force_n: f64,
-    /// Friction along the contact tangent (N).
-    pub friction_force_n: f64,
-    /// Sliding velocity along the contact tangent (m/s).
-    pub sliding_velocity_m_per_s: f64,
-    /// Penetration (m).
-    pub depth_m: f64,
-    /// Surface coordinate of the contact (m).
-    pub surface_u_m: f64,
-    /// True tangent angle at the contact (rad, world).
-    pub tangent_angle_rad: f64,
-    /// Joint torques applied (N·m).
-    pub torque_nm: [f64; 2],
+wire_message! {
+    version = 1;
+    /// The world, every servo tick: what the plant simulation knows and the controller does not.
+    #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+    #[type_name("afs::PlantSample")]
+    pub struct PlantSample {
+        /// The layout version, `Self::VERSION` (docs/messages.md).
+        pub version: u32,
+        /// Number of contacts (0, 1, 2).
+        pub contact_count: u32,
+        /// Servo tick index since the world started.
+        pub seq: u64,
+        /// Monotonic time the tick woke (ns).
+        pub tick_ns: u64,
+        /// Monotonic time of publication (ns).
+        pub publish_ns: u64,
+        /// Simulated time (s).
+        pub time_s: f64,
+        /// Joint angles (rad).
+        pub q_rad: [f64; 2],
+        /// Joint rates (rad/s).
+        pub qd_rad_per_s: [f64; 2],
+        /// Tool tip (m, world).
+        pub tip_m: [f64; 2],
+        /// Tool tip velocity (m/s, world).
+        pub tip_velocity_m_per_s: [f64; 2],
+        /// Total contact force on the tool (N, world).
+        pub contact_force_n: [f64; 2],
+        /// Force the sensor feels (N, sensor frame: x along link 2).
+        pub sensor_force_n: [f64; 2],
+        /// Moment the sensor feels (N·m).
+        pub sensor_torque_nm: f64,
+        /// Sum of normal pushes (N).
+        pub normal_force_n: f64,
+        /// Friction along the contact tangent (N).
+        pub friction_force_n: f64,
+        /// Sliding velocity along the contact tangent (m/s).
+        pub sliding_velocity_m_per_s: f64,
+        /// Penetration (m).
+        pub depth_m: f64,
+        /// Surface coordinate of the contact (m).
+        pub surface_u_m: f64,
+        /// True tangent angle at the contact (rad, world).
+        pub tangent_angle_rad: f64,
+        /// Joint torques applied (N·m).
+        pub torque_nm: [f64; 2],
+    }
 }
 
 impl PlantSample {
     /// The world sample of a tick.
     pub fn of_tick(tr: &PlantTruth, seq: u64, tick_ns: u64) -> Self {
         PlantSample {
-            version: VERSION,
+            version: Self::VERSION,
             contact_count: u32::try_from(tr.contact_count).unwrap_or(u32::MAX),
             seq,
             tick_ns,
@@ -103,37 +104,39 @@ wire_flags! {
     }
 }
 
-/// One force-sensor sample.
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
-#[type_name("afs::WrenchSample")]
-#[repr(C)]
-pub struct WrenchSample {
-    /// [`VERSION`](super::VERSION).
-    pub version: u32,
-    /// [`WrenchFlags`].
-    pub flags: WrenchFlags,
-    /// Sensor sample index since the sensor process started.
-    pub seq: u64,
-    /// Monotonic time the sensor process started (ns): a restarted sensor has a later epoch
-    /// and numbers its samples from 0 again.
-    pub epoch_ns: u64,
-    /// `seq` of the [`PlantSample`] sampled (0 from an RDT device, which does not know it).
-    pub plant_seq: u64,
-    /// Its `tick_ns` (0 from an RDT device).
-    pub plant_tick_ns: u64,
-    /// Monotonic time of the sample (ns): from an RDT device, the datagram's receipt.
-    pub sample_ns: u64,
-    /// Monotonic time of publication (ns).
-    pub publish_ns: u64,
-    /// Measured force (N, sensor frame).
-    pub force_n: [f64; 2],
-    /// Measured moment (N·m).
-    pub torque_nm: f64,
-    /// The zero-load reading taken in free air at start-up, to subtract (N); 0 from an RDT
-    /// device, whose own bias does it.
-    pub tare_force_n: [f64; 2],
-    /// Its moment (N·m).
-    pub tare_torque_nm: f64,
+wire_message! {
+    version = 1;
+    /// One force-sensor sample.
+    #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+    #[type_name("afs::WrenchSample")]
+    pub struct WrenchSample {
+        /// The layout version, `Self::VERSION` (docs/messages.md).
+        pub version: u32,
+        /// [`WrenchFlags`].
+        pub flags: WrenchFlags,
+        /// Sensor sample index since the sensor process started.
+        pub seq: u64,
+        /// Monotonic time the sensor process started (ns): a restarted sensor has a later epoch
+        /// and numbers its samples from 0 again.
+        pub epoch_ns: u64,
+        /// `seq` of the [`PlantSample`] sampled (0 from an RDT device, which does not know it).
+        pub plant_seq: u64,
+        /// Its `tick_ns` (0 from an RDT device).
+        pub plant_tick_ns: u64,
+        /// Monotonic time of the sample (ns): from an RDT device, the datagram's receipt.
+        pub sample_ns: u64,
+        /// Monotonic time of publication (ns).
+        pub publish_ns: u64,
+        /// Measured force (N, sensor frame).
+        pub force_n: [f64; 2],
+        /// Measured moment (N·m).
+        pub torque_nm: f64,
+        /// The zero-load reading taken in free air at start-up, to subtract (N); 0 from an RDT
+        /// device, whose own bias does it.
+        pub tare_force_n: [f64; 2],
+        /// Its moment (N·m).
+        pub tare_torque_nm: f64,
+    }
 }
 
 impl WrenchSample {
@@ -168,80 +171,82 @@ wire_flags! {
     }
 }
 
-/// The controller's state, every servo tick.
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
-#[type_name("afs::ServoSample")]
-#[repr(C)]
-pub struct ServoSample {
-    /// [`VERSION`](super::VERSION).
-    pub version: u32,
-    /// [`ServoMode`] as its wire code (`u32::from`, `ServoMode::try_from`).
-    pub mode: u32,
-    /// [`ServoFlags`].
-    pub flags: ServoFlags,
-    /// Why the safe state was last entered ([`crate::watchdog::Verdict`] code, 0 = never).
-    pub safe_reason: u32,
-    /// Servo tick index (the same as the [`PlantSample`] of the tick).
-    pub seq: u64,
-    /// Monotonic time the tick woke (ns).
-    pub tick_ns: u64,
-    /// `seq` of the [`WrenchSample`] used (u64::MAX: none yet).
-    pub wrench_seq: u64,
-    /// Its `sample_ns`.
-    pub wrench_sample_ns: u64,
-    /// Age of the force data at use: tick time − sample time (ns).
-    pub force_age_ns: u64,
-    /// Monotonic time of publication (ns).
-    pub publish_ns: u64,
-    /// Simulated time (s).
-    pub time_s: f64,
-    /// Measured normal force (N).
-    pub normal_force_n: f64,
-    /// Measured tangential force (N).
-    pub tangential_force_n: f64,
-    /// Friction resisting the motion, normalised to the model's reference force (N).
-    pub friction_normalized_n: f64,
-    /// Commanded Aω (m/s).
-    pub a_omega_m_per_s: f64,
-    /// Dither amplitude (m).
-    pub dither_amplitude_m: f64,
-    /// Dither phase (rad).
-    pub dither_phase_rad: f64,
-    /// Nominal tangential velocity (m/s).
-    pub nominal_velocity_m_per_s: f64,
-    /// Requested nominal velocity (m/s): the nominal velocity ramps towards it.
-    pub velocity_target_m_per_s: f64,
-    /// Measured tip velocity along the estimated tangent (m/s).
-    pub tangent_velocity_m_per_s: f64,
-    /// Estimated tangent angle (rad, world).
-    pub tangent_angle_rad: f64,
-    /// Cartesian set-point (m, world).
-    pub set_point_m: [f64; 2],
-    /// Joint torques (N·m).
-    pub torque_nm: [f64; 2],
-    /// Estimations started.
-    pub estimations_started: u32,
-    /// Accepted estimates.
-    pub estimates: u32,
-    /// Re-probes.
-    pub reprobes: u32,
-    /// Failed estimations.
-    pub failures: u32,
-    /// Estimations abandoned because the force data was lost mid-probe (the safe state).
-    pub aborted: u32,
-    /// Entries into the safe state.
-    pub safe_entries: u32,
-    /// Estimations started because they were asked for ([`ServoCommand`]).
-    pub estimations_requested: u32,
-    /// Reserved (0).
-    pub reserved: u32,
+wire_message! {
+    version = 2;
+    /// The controller's state, every servo tick.
+    #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+    #[type_name("afs::ServoSample.v2")]
+    pub struct ServoSample {
+        /// The layout version, `Self::VERSION` (docs/messages.md).
+        pub version: u32,
+        /// [`ServoMode`] as its wire code (`u32::from`, `ServoMode::try_from`).
+        pub mode: u32,
+        /// [`ServoFlags`].
+        pub flags: ServoFlags,
+        /// Why the safe state was last entered ([`crate::watchdog::Verdict`] code, 0 = never).
+        pub safe_reason: u32,
+        /// Servo tick index (the same as the [`PlantSample`] of the tick).
+        pub seq: u64,
+        /// Monotonic time the tick woke (ns).
+        pub tick_ns: u64,
+        /// `seq` of the [`WrenchSample`] used (u64::MAX: none yet).
+        pub wrench_seq: u64,
+        /// Its `sample_ns`.
+        pub wrench_sample_ns: u64,
+        /// Age of the force data at use: tick time − sample time (ns).
+        pub force_age_ns: u64,
+        /// Monotonic time of publication (ns).
+        pub publish_ns: u64,
+        /// Simulated time (s).
+        pub time_s: f64,
+        /// Measured normal force (N).
+        pub normal_force_n: f64,
+        /// Measured tangential force (N).
+        pub tangential_force_n: f64,
+        /// Friction resisting the motion, normalised to the model's reference force (N).
+        pub friction_normalized_n: f64,
+        /// Commanded Aω (m/s).
+        pub a_omega_m_per_s: f64,
+        /// Dither amplitude (m).
+        pub dither_amplitude_m: f64,
+        /// Dither phase (rad).
+        pub dither_phase_rad: f64,
+        /// Nominal tangential velocity (m/s).
+        pub nominal_velocity_m_per_s: f64,
+        /// Requested nominal velocity (m/s): the nominal velocity ramps towards it.
+        pub velocity_target_m_per_s: f64,
+        /// Measured tip velocity along the estimated tangent (m/s).
+        pub tangent_velocity_m_per_s: f64,
+        /// Estimated tangent angle (rad, world).
+        pub tangent_angle_rad: f64,
+        /// Cartesian set-point (m, world).
+        pub set_point_m: [f64; 2],
+        /// Joint torques (N·m).
+        pub torque_nm: [f64; 2],
+        /// Estimations started.
+        pub estimations_started: u32,
+        /// Accepted estimates.
+        pub estimates: u32,
+        /// Re-probes.
+        pub reprobes: u32,
+        /// Failed estimations.
+        pub failures: u32,
+        /// Estimations abandoned because the force data was lost mid-probe (the safe state).
+        pub aborted: u32,
+        /// Entries into the safe state.
+        pub safe_entries: u32,
+        /// Estimations started because they were asked for ([`ServoCommand`]).
+        pub estimations_requested: u32,
+        /// Reserved (0).
+        pub reserved: u32,
+    }
 }
 
 impl ServoSample {
     /// The controller sample of a tick (the wrench fields are the caller's).
     pub fn of_tick(servo: &ServoCore, seq: u64, tick_ns: u64, time_s: f64) -> Self {
         let mut s = ServoSample {
-            version: VERSION,
+            version: Self::VERSION,
             seq,
             tick_ns,
             time_s,
@@ -273,14 +278,13 @@ impl ServoSample {
         self.tangent_angle_rad = d.tangent_angle_rad;
         self.set_point_m = [d.set_point.x, d.set_point.y];
         self.torque_nm = [d.torque[0], d.torque[1]];
-        let n = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
-        self.estimations_started = n(c.started);
-        self.estimates = n(c.estimates);
-        self.reprobes = n(c.reprobes);
-        self.failures = n(c.failures);
-        self.aborted = n(c.aborted);
-        self.safe_entries = n(c.safe_entries);
-        self.estimations_requested = n(c.requested);
+        self.estimations_started = c.started;
+        self.estimates = c.estimates;
+        self.reprobes = c.reprobes;
+        self.failures = c.failures;
+        self.aborted = c.aborted;
+        self.safe_entries = c.safe_entries;
+        self.estimations_requested = c.requested;
     }
 }
 
@@ -315,22 +319,24 @@ wire_code! {
     }
 }
 
-/// A command to the servo (thesis §5.3.2: surface tracking on demand).
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
-#[type_name("afs::ServoCommand")]
-#[repr(C)]
-pub struct ServoCommand {
-    /// [`VERSION`](super::VERSION).
-    pub version: u32,
-    /// [`Command`] as its code (a reader refuses and counts an unknown one).
-    pub command: u32,
-    /// Sender's sequence number.
-    pub seq: u64,
-    /// Monotonic time of publication (ns).
-    pub publish_ns: u64,
-    /// [`Command::EstimateTangent`]: the servo's `estimations_started` the sender last saw;
-    /// the command lapses once more estimations than this have started.
-    pub started_before: u32,
-    /// Reserved (0).
-    pub reserved: u32,
+wire_message! {
+    version = 1;
+    /// A command to the servo (thesis §5.3.2: surface tracking on demand).
+    #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+    #[type_name("afs::ServoCommand")]
+    pub struct ServoCommand {
+        /// The layout version, `Self::VERSION` (docs/messages.md).
+        pub version: u32,
+        /// [`Command`] as its code (a reader refuses and counts an unknown one).
+        pub command: u32,
+        /// Sender's sequence number.
+        pub seq: u64,
+        /// Monotonic time of publication (ns).
+        pub publish_ns: u64,
+        /// [`Command::EstimateTangent`]: the servo's `estimations_started` the sender last saw;
+        /// the command lapses once more estimations than this have started.
+        pub started_before: u32,
+        /// Reserved (0).
+        pub reserved: u32,
+    }
 }

@@ -131,17 +131,17 @@ impl ScenarioMonitor {
     pub fn push(&mut self, p: &PlantSample, s: &ServoSample) {
         let m = MonitorTick::from_samples(p, s);
         self.tracking.push(&m);
-        if s.estimations_requested as usize > self.counters.requested {
+        if s.estimations_requested > self.counters.requested {
             self.requested.push(s.seq);
         }
         self.counters = EstimationCounters {
-            started: s.estimations_started as usize,
-            requested: s.estimations_requested as usize,
-            estimates: s.estimates as usize,
-            reprobes: s.reprobes as usize,
-            failures: s.failures as usize,
-            aborted: s.aborted as usize,
-            safe_entries: s.safe_entries as usize,
+            started: s.estimations_started,
+            requested: s.estimations_requested,
+            estimates: s.estimates,
+            reprobes: s.reprobes,
+            failures: s.failures,
+            aborted: s.aborted,
+            safe_entries: s.safe_entries,
             ..self.counters
         };
         if s.flags.contains(ServoFlags::SAFE) {

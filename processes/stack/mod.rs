@@ -1,5 +1,13 @@
-//! The stack file (`examples/stack.toml`): the process graph `afs run` launches, with each
-//! board's restart policy, and the command line's overrides of it.
+//! The stack: its file (`examples/stack.toml`), the process graph `afs run` launches with each
+//! board's restart policy and the command line's overrides of it; and what the supervisor and
+//! `afs chaos` both say of a running stack ([`Timeline`] of a restart, [`Footprint`]). It sits
+//! below both: neither imports the other for it.
+
+mod footprint;
+mod timeline;
+
+pub use footprint::Footprint;
+pub use timeline::Timeline;
 
 use crate::ipc;
 use afs_shared::faults::FaultKind;

@@ -12,11 +12,9 @@ use afs_shared::msg::{
 };
 use afs_shared::tangent::ProbeSample;
 use anyhow::{Context, Result, bail};
-use iceoryx2::node::NodeView;
 use iceoryx2::port::backpressure_strategy::BackpressureStrategy;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::{blackboard, publish_subscribe, request_response};
-use std::path::{Path, PathBuf};
 
 /// The iceoryx2 service type of the stack: inter-process.
 pub type Svc = ipc::Service;
@@ -215,9 +213,50 @@ where
         Some(n) => builder.subscriber_max_borrowed_samples(n),
         None => builder,
     };
-    builder
-        .open_or_create()
-        .with_context(|| format!("opening service '{service_name}'"))
+    builder.open_or_create().map_err(|e| {
+        let what = match layout_mismatch::<T>(node, service_name) {
+            Some(m) => m,
+            None => format!("{e:?}"),
+        };
+        anyhow::anyhow!("opening service '{service_name}': {what}")
+    })
+}
+
+/// The layout version an afs type name carries: `afs::Name.vN` is N, `afs::Name` is 1.
+pub fn layout_version(type_name: &str) -> u32 {
+    type_name
+        .rsplit_once(".v")
+        .and_then(|(_, v)| v.parse().ok())
+        .unwrap_or(1)
+}
+
+/// When the publish-subscribe service `service_name` exists with another payload type than
+/// `T`: both type names, layout versions and sizes, and what to do (docs/messages.md,
+/// *Versions*). None when it does not exist or carries `T`.
+pub fn layout_mismatch<T: ZeroCopySend>(node: &Node<Svc>, service_name: &str) -> Option<String> {
+    let details = <Svc as iceoryx2::service::Service>::details(
+        &name(service_name).ok()?,
+        node.config(),
+        iceoryx2::service::messaging_pattern::MessagingPattern::PublishSubscribe,
+    )
+    .ok()??;
+    let payload = &details
+        .static_details
+        .publish_subscribe()
+        .message_type_details()
+        .payload;
+    let theirs = payload.type_name().to_string();
+    // SAFETY: type_name returns the derive attribute's string.
+    let ours = unsafe { <T as ZeroCopySend>::type_name() };
+    (theirs != ours).then(|| {
+        format!(
+            "it carries {theirs} (layout version {}, {} bytes) and this program reads {ours} (layout version {}, {} bytes): use afs and clients of the same message versions (docs/messages.md, Versions)",
+            layout_version(&theirs),
+            payload.size(),
+            layout_version(ours),
+            std::mem::size_of::<T>()
+        )
+    })
 }
 
 /// The plant stream.
@@ -409,277 +448,45 @@ pub fn open_world(node: &Node<Svc>) -> Option<blackboard::PortFactory<Svc, u64>>
 /// The publisher settings of every stream: never block the publisher.
 pub const BACKPRESSURE: BackpressureStrategy = BackpressureStrategy::DiscardData;
 
-/// What `Node::list` says about a stack's nodes.
-#[derive(Debug, Default, Clone)]
-pub struct NodeCensus {
-    /// Alive nodes: (name, pid).
-    pub alive: Vec<(String, i32)>,
-    /// Dead nodes whose resources were removed.
-    pub cleaned: usize,
-    /// Dead nodes that could not be cleaned.
-    pub failed: usize,
-}
+mod prefix;
 
-/// Takes `prefix` for a new stack (or benchmark): refuses it while any of its nodes is alive,
-/// and otherwise removes what dead ones left ([`release_prefix`]), then, as a last resort, any
-/// file of the prefix iceoryx2 could not remove (no live node can be using it). Returns (dead
-/// nodes cleaned, files removed by name).
-pub fn claim_prefix(prefix: &str) -> Result<(usize, usize)> {
-    let census = census(prefix, true)?;
-    if !census.alive.is_empty() {
-        bail!(
-            "a stack with prefix '{prefix}' is already running ({}); stop it or choose another --prefix",
-            census
-                .alive
-                .iter()
-                .map(|(n, p)| format!("{n} pid {p}"))
-                .collect::<Vec<_>>()
-                .join(", ")
-        );
-    }
-    Ok((census.cleaned, clear_prefix(prefix)?.len()))
-}
-
-/// [`release_prefix`], then removes by name what is still left (a dead stack's files iceoryx2
-/// could not remove; with no node of the prefix alive nothing uses them). Returns what was
-/// removed by name.
-pub fn clear_prefix(prefix: &str) -> Result<Vec<PathBuf>> {
-    let left = release_prefix(prefix)?;
-    Ok(left
-        .into_iter()
-        .filter(|f| {
-            if f.is_dir() {
-                std::fs::remove_dir_all(f).is_ok()
-            } else {
-                std::fs::remove_file(f).is_ok()
-            }
-        })
-        .collect())
-}
-
-/// Lists the nodes of stack `prefix`; with `clean`, removes the resources of dead ones.
-pub fn census(prefix: &str, clean: bool) -> Result<NodeCensus> {
-    let cfg = config(prefix)?;
-    let mut out = NodeCensus::default();
-    let mut dead = Vec::new();
-    Node::<Svc>::list(&cfg, |state| {
-        match state {
-            NodeState::Alive(v) => {
-                let (n, pid) = v.details().as_ref().map_or((String::from("?"), 0), |d| {
-                    (d.name().to_string(), d.process_id().value())
-                });
-                out.alive.push((n, pid));
-            }
-            NodeState::Dead(v) => dead.push(v),
-            _ => {}
-        }
-        CallbackProgression::Continue
-    })
-    .with_context(|| format!("listing iceoryx2 nodes of stack '{prefix}'"))?;
-    if clean {
-        for v in dead {
-            match v.try_remove_stale_resources() {
-                Ok(()) => out.cleaned += 1,
-                Err(_) => out.failed += 1,
-            }
-        }
-    }
-    Ok(out)
-}
-
-/// Files of a running stack `prefix` that belong to no live process: the directories and
-/// monitors of dead nodes, and the data segments and connections of ports no live node owns.
-/// After a board dies and the supervisor has cleaned up, there are none; any left is a leak.
-/// A file must look stale in two scans 50 ms apart (a port being created is not a leak).
-pub fn stale_files(prefix: &str) -> Result<Vec<PathBuf>> {
-    let first = stale_scan(prefix)?;
-    std::thread::sleep(std::time::Duration::from_millis(50));
-    let second = stale_scan(prefix)?;
-    Ok(first.into_iter().filter(|f| second.contains(f)).collect())
-}
-
-fn stale_scan(prefix: &str) -> Result<Vec<PathBuf>> {
-    let files = leftovers(prefix);
-    let cfg = config(prefix)?;
-    let mut alive = Vec::new();
-    Node::<Svc>::list(&cfg, |state| {
-        if let NodeState::Alive(v) = &state
-            && let Ok(id) = u128::from_str_radix(&v.id().to_string(), 16)
-        {
-            alive.push(id.to_string());
-        }
-        CallbackProgression::Continue
-    })
-    .with_context(|| format!("listing iceoryx2 nodes of stack '{prefix}'"))?;
-    let fp = file_prefix(prefix);
-    let stem = |f: &Path| -> Option<(String, String)> {
-        let name = f.file_name()?.to_str()?;
-        let rest = name.strip_prefix(&fp)?;
-        let (stem, ext) = rest.rsplit_once('.')?;
-        Some((stem.to_string(), ext.to_string()))
-    };
-    // Node directories are named by node id; port tags inside them by port id.
-    let node_of = |f: &Path| -> Option<String> {
-        let parent = f.parent()?;
-        (parent.parent()?.file_name()? == "nodes")
-            .then(|| parent.file_name()?.to_str().map(String::from))?
-    };
-    let mut live_ports = std::collections::HashSet::new();
-    for f in &files {
-        if let (Some(node), Some((port, ext))) = (node_of(f), stem(f))
-            && ext == "port_tag"
-            && alive.contains(&node)
-        {
-            live_ports.insert(port);
-        }
-    }
-    let mut stale = Vec::new();
-    for f in &files {
-        let Some((stem, ext)) = stem(f) else {
-            continue;
-        };
-        let dead = if let Some(node) = node_of(f) {
-            !alive.contains(&node)
-        } else {
-            match ext.as_str() {
-                "node_monitor" | "node_monitor_context" | "node_monitor_owner_lock" => {
-                    !alive.contains(&stem)
-                }
-                // <service>_<port>.data (or a resizable segment's <service>_<port>__<n>.data
-                // and __mgmt.data); <service>_<sender port>_<receiver port>.connection
-                "data" => segment_owner(&stem)
-                    .rsplit('_')
-                    .next()
-                    .is_some_and(|p| !live_ports.contains(p)),
-                "connection" => stem.rsplit('_').take(2).any(|p| !live_ports.contains(p)),
-                _ => false,
-            }
-        };
-        if dead {
-            stale.push(f.clone());
-        }
-    }
-    Ok(stale)
-}
-
-/// The processes whose ports a data segment or connection file of stack `prefix` belongs to,
-/// read from its name (`…_<port>.data`, `…_<sender port>_<receiver port>.connection`): an
-/// iceoryx2 port id is a `UniqueSystemId`, whose bits 64–95 are the pid of the process that
-/// created it.
-pub fn file_pids(path: &Path, prefix: &str) -> Vec<u32> {
-    let fp = file_prefix(prefix);
-    let Some((stem, ext)) = path
-        .file_name()
-        .and_then(|n| n.to_str())
-        .and_then(|n| n.strip_prefix(&fp))
-        .and_then(|n| n.rsplit_once('.'))
-    else {
-        return Vec::new();
-    };
-    let ports = match ext {
-        "data" => 1,
-        "connection" => 2,
-        _ => return Vec::new(),
-    };
-    let mut pids: Vec<u32> = segment_owner(stem)
-        .rsplit('_')
-        .take(ports)
-        .filter_map(|p| p.parse::<u128>().ok())
-        .map(|id| (id >> 64) as u32)
-        .collect();
-    pids.reverse();
-    pids
-}
-
-/// A data segment's name without the suffix of a resizable segment (iceoryx2 names those
-/// `<service>_<port>__<n>` and `<service>_<port>__mgmt`: publishers of slices that grow, the
-/// link's tunnel among them), so that it ends in its port's id as the others do.
-fn segment_owner(stem: &str) -> &str {
-    stem.split_once("__").map_or(stem, |(owner, _)| owner)
-}
-
-/// Files of stack `prefix` left in /dev/shm and under the iceoryx2 root.
-pub fn leftovers(prefix: &str) -> Vec<PathBuf> {
-    let p = file_prefix(prefix);
-    let mut out = Vec::new();
-    let root = config(prefix)
-        .map(|c| PathBuf::from(c.global.root_path().to_string()))
-        .unwrap_or_else(|_| PathBuf::from("/tmp/iceoryx2"));
-    scan(Path::new("/dev/shm"), &p, &mut out, 0);
-    scan(&root, &p, &mut out, 0);
-    out
-}
-
-fn scan(dir: &Path, prefix: &str, out: &mut Vec<PathBuf>, depth: usize) {
-    let Ok(rd) = std::fs::read_dir(dir) else {
-        return;
-    };
-    for e in rd.flatten() {
-        let path = e.path();
-        let name = e.file_name().to_string_lossy().into_owned();
-        if name.starts_with(prefix) {
-            out.push(path.clone());
-        }
-        if depth < 4 && e.file_type().is_ok_and(|t| t.is_dir()) {
-            scan(&path, prefix, out, depth + 1);
-        }
-    }
-}
-
-/// Releases stack `prefix` once its nodes are gone: iceoryx2's dead-node clean-up removes
-/// what dead nodes held (their nodes, ports, connections, and services no node uses any more),
-/// and the one file iceoryx2 keeps by design, the domain's node counter
-/// ([`is_node_counter`]), is removed by name: it holds no state a later process needs (node
-/// ids are unique by pid and creation time, docs/reliability.md). Refuses while a node of the
-/// stack is alive. Returns the files of the prefix still left: a leak, for the caller to
-/// report.
-pub fn release_prefix(prefix: &str) -> Result<Vec<PathBuf>> {
-    let c = census(prefix, true).context("cleaning dead nodes")?;
-    if !c.alive.is_empty() {
-        bail!(
-            "stack '{prefix}' still has live nodes ({}); not releasing it",
-            c.alive
-                .iter()
-                .map(|(n, p)| format!("{n} pid {p}"))
-                .collect::<Vec<_>>()
-                .join(", ")
-        );
-    }
-    for f in leftovers(prefix).iter().filter(|f| is_node_counter(f)) {
-        let _ = std::fs::remove_file(f);
-    }
-    Ok(leftovers(prefix))
-}
-
-/// True for the domain's node-counter segment (`…node….global_mgmt` in /dev/shm): created by
-/// the first node of a prefix and kept by iceoryx2 when the last one goes.
-pub fn is_node_counter(f: &Path) -> bool {
-    let suffix = iceoryx2::config::Node::default().global_mgmt_suffix;
-    f.file_name()
-        .and_then(|n| n.to_str())
-        .is_some_and(|n| n.ends_with(&suffix.to_string()))
-}
+pub use prefix::*;
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// A port id is a `UniqueSystemId` whose bits 64–95 are the creating pid; a resizable
-    /// segment's `__<n>` and `__mgmt` suffixes name the same port as the plain segment.
+    /// A client built for an older layout of a message (here `ServoSample` version 1, 208
+    /// bytes) is refused when it opens the stream, with both versions named.
     #[test]
-    fn data_segments_name_the_process_of_their_port() {
-        let port: u128 = (4242u128 << 64) | 77;
-        let fp = file_prefix("ut");
-        for suffix in ["", "__0", "__3", "__mgmt"] {
-            let f = PathBuf::from(format!("/dev/shm/{fp}0354a2_{port}{suffix}.data"));
-            assert_eq!(file_pids(&f, "ut"), [4242], "{}", f.display());
+    fn a_client_of_an_older_layout_is_refused_with_both_versions() {
+        #[derive(Debug, Clone, Copy, ZeroCopySend)]
+        #[type_name("afs::ServoSample")]
+        #[repr(C)]
+        struct ServoSampleV1 {
+            bytes: [u64; 26],
         }
-        let c = PathBuf::from(format!(
-            "/dev/shm/{fp}0354a2_{port}_{}.connection",
-            9u128 << 64
-        ));
-        assert_eq!(file_pids(&c, "ut"), [4242, 9]);
-        assert_eq!(segment_owner("svc_12__mgmt"), "svc_12");
-        assert_eq!(segment_owner("svc_12"), "svc_12");
+        let prefix = format!("ut_ver_{}", std::process::id());
+        let node = node(&prefix, "versions_test").unwrap();
+        let current = servo(&node).unwrap();
+        let e = stream::<ServoSampleV1>(&node, service::SERVO, TICK_STREAM)
+            .expect_err("refused")
+            .to_string();
+        for needle in [
+            "afs::ServoSample.v2 (layout version 2, 216 bytes)",
+            "afs::ServoSample (layout version 1, 208 bytes)",
+        ] {
+            assert!(e.contains(needle), "{e}");
+        }
+        assert_eq!(layout_mismatch::<ServoSample>(&node, service::SERVO), None);
+        assert_eq!(
+            (
+                layout_version("afs::ServoSample.v2"),
+                layout_version("afs::X")
+            ),
+            (2, 1)
+        );
+        drop((current, node));
+        let _ = release_prefix(&prefix);
     }
 }

@@ -1,0 +1,458 @@
+//! The servo board as a tick struct: its state in one place ([`ServoBoard`]), set up by
+//! [`ServoBoard::start`], stepped by [`ServoBoard::tick`], closed by [`ServoBoard::finish`].
+
+use super::ServoArgs;
+use super::link::EstimatorLink;
+use super::ports::Ports;
+use super::timing::{Timing, publish_stats};
+use crate::boards::Startup;
+use crate::ipc;
+use crate::{hist, rt};
+use afs_shared::msg::{
+    Board, Command, LoopFlags, LoopStats, PlantSample, ServoFlags, ServoSample, WorldSnapshot,
+    WrenchFlags, WrenchSample,
+};
+use afs_shared::plant::{Plant, PlantState};
+use afs_shared::scenario::{DriverState, Scenario, ScenarioDriver};
+use afs_shared::sensor::Wrench;
+use afs_shared::servo::{ServoCore, ServoInput, ServoMode};
+use afs_shared::watchdog::{GateCounters, GateParams, SampleGate, Verdict};
+use anyhow::{Context, Result, bail};
+use iceoryx2::port::update_connections::UpdateConnections;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// What a tick did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Tick {
+    /// Ran; the scenario goes on.
+    Ran,
+    /// The scenario reached its end or its duration (nothing was run).
+    Done,
+}
+
+/// The servo board: the world, the controller, the scenario driver, the force gate, the ports
+/// and the loop's statistics.
+pub(super) struct ServoBoard {
+    servo: ServoCore,
+    plant: Plant,
+    driver: ScenarioDriver,
+    gate: SampleGate,
+    /// The gate's verdicts on the samples flagged as injected (`afs chaos`).
+    injected: GateCounters,
+    ports: Ports,
+    link: EstimatorLink,
+    startup: Startup,
+    timing: Timing,
+    stats: LoopStats,
+    /// The next tick's number; ticks past `tick_limit` are not the scenario's.
+    seq: u64,
+    tick_limit: u64,
+    dt: f64,
+    period_ns: u64,
+    /// Why the safe state was last entered (a [`Verdict`] code).
+    safe_reason: u32,
+    /// A tangent estimate asked for, until the servo can start it: the number of estimations
+    /// started when it was sent (it lapses once more have started).
+    estimate_wanted: Option<u32>,
+    last_tare: Wrench,
+}
+
+impl ServoBoard {
+    /// Opens the ports, resumes the world from the supervisor's blackboard (`--resume`),
+    /// publishes it until the first force sample, builds or resumes the controller, and goes
+    /// real-time. None if stopped first.
+    pub(super) fn start(args: &ServoArgs, stop: &AtomicBool) -> Result<Option<Self>> {
+        let scenario = Scenario::new(&args.scenario, &args.base).map_err(anyhow::Error::msg)?;
+        let cfg = &scenario.cfg;
+        let dt = cfg.servo.dt();
+        let period_ns = (dt * 1e9).round() as u64;
+        let duration = if args.duration_s > 0.0 {
+            args.duration_s.min(scenario.natural_duration_s)
+        } else {
+            scenario.natural_duration_s
+        };
+        let mut startup = Startup::new(Board::Servo, args.main_ns);
+        let node = ipc::node(&args.prefix, Board::Servo.name())?;
+        startup.report.node_ns = Startup::now();
+        let (ports, transport) = Ports::open(&node, args)?;
+        startup.open(&node)?;
+        startup.report.ports_ns = Startup::now();
+
+        // The world: fresh, or where the last servo left it, with the counts that go on
+        // across restarts.
+        let q0 = cfg.start_configuration().map_err(anyhow::Error::msg)?;
+        let mut plant = Plant::new(cfg.plant.clone(), cfg.surface.clone(), q0);
+        let snapshot = match (&ports.world, args.resume) {
+            (Some(w), true) => w.newest()?,
+            _ => None,
+        };
+        let gate_params = GateParams {
+            max_age_ns: (args.max_force_age_ms * 1e6) as u64,
+            force_limit_n: cfg.sensor.range_force_n,
+            torque_limit_nm: cfg.sensor.range_torque_nm,
+            ..GateParams::default()
+        };
+        let (mut gate, mut injected) = (SampleGate::new(gate_params), GateCounters::default());
+        if let Some(s) = &snapshot {
+            plant.restore(&PlantState::from(&s.world));
+            gate = SampleGate::resume(gate_params, s.gate);
+            injected = s.injected;
+        }
+        // A resumed servo starts by sending its predecessor's last tick again, then continues
+        // with the next one.
+        let mut seq = snapshot.map_or(0, |s| s.seq);
+        let mut input = ForceInput {
+            ports: &ports,
+            gate: &mut gate,
+            injected: &mut injected,
+        };
+        let p0 = first_world_sample(&plant, snapshot.as_ref(), seq);
+        seq += 1;
+        let Some(first) = input.wait(p0, args, period_ns, &mut startup, stop)? else {
+            return Ok(None);
+        };
+        let (servo, driver) = controller(&scenario, q0, &first, snapshot.as_ref(), &plant)?;
+        let mut board = Self {
+            servo,
+            plant,
+            driver,
+            gate,
+            injected,
+            ports,
+            link: EstimatorLink::new(transport, args.estimator_timeout_s, args.estimator_attempts),
+            startup,
+            timing: Timing::new()?,
+            stats: LoopStats {
+                version: LoopStats::VERSION,
+                period_ns,
+                ..Default::default()
+            },
+            seq,
+            // Ticks 1..=tick_limit are the scenario's (0 is the world's first sample): the
+            // same count the lockstep runs, whatever restarts happen in between.
+            tick_limit: (duration / dt).round() as u64,
+            dt,
+            period_ns,
+            safe_reason: 0,
+            estimate_wanted: None,
+            last_tare: first.tare(),
+        };
+        board.go_realtime(args);
+        Ok(Some(board))
+    }
+
+    /// SCHED_FIFO, memory lock and pinning, each refusal a warning; then the start-up report.
+    fn go_realtime(&mut self, args: &ServoArgs) {
+        let rtr = rt::setup(args.priority, true, args.cpu);
+        self.startup.report.rt_ns = Startup::now();
+        self.startup.send();
+        for w in &rtr.warnings {
+            eprintln!("afs-servo: warning: {w}");
+        }
+        self.stats.flags.set(LoopFlags::SCHED_FIFO, rtr.fifo);
+        self.stats.flags.set(LoopFlags::MLOCKED, rtr.mlocked);
+        self.stats.flags.set(LoopFlags::PINNED, rtr.pinned);
+    }
+
+    /// The servo period (ns).
+    pub(super) fn period_ns(&self) -> u64 {
+        self.period_ns
+    }
+
+    /// One tick, woken for `deadline`: force data through the gate, the scenario, one
+    /// controller and one world step, the tick published, the estimator request moved along,
+    /// the loop's statistics. Allocates nothing, takes no lock, logs nothing.
+    pub(super) fn tick(&mut self, deadline: u64) -> Tick {
+        let now = rt::monotonic_ns();
+        let late = now.saturating_sub(deadline);
+        self.take_force();
+        let (input, used) = self.input(now);
+        let t = self.plant.time();
+        if self.seq > self.tick_limit
+            || self
+                .driver
+                .step(t, self.plant.truth().surface_u_m, &mut self.servo)
+                == DriverState::Done
+        {
+            return Tick::Done;
+        }
+        self.take_commands();
+        let tau = self.servo.step(&input, self.dt);
+        self.plant.step(tau, self.dt);
+        if self.servo.is_safe() {
+            self.stats.safe_ticks += 1;
+        }
+        self.publish(now, used);
+        self.link.tick(&mut self.servo, now);
+        self.account(now, late);
+        self.seq += 1;
+        Tick::Ran
+    }
+
+    /// Every new force sample through the gate.
+    fn take_force(&mut self) {
+        ForceInput {
+            ports: &self.ports,
+            gate: &mut self.gate,
+            injected: &mut self.injected,
+        }
+        .take();
+    }
+
+    /// The controller's input from the joints and the newest accepted force sample, and that
+    /// sample with its age (None: none young enough, the safe state's reason noted).
+    fn input(&mut self, now: u64) -> (ServoInput, Option<(WrenchSample, u64)>) {
+        let (q, qd) = self.plant.joints();
+        let mut input = ServoInput {
+            q,
+            qd,
+            ..Default::default()
+        };
+        match self.gate.current(now) {
+            Ok((w, age)) => {
+                input.wrench = w.wrench();
+                input.force_valid = true;
+                let tare = w.tare();
+                if tare != self.last_tare {
+                    self.servo.set_tare(tare);
+                    self.last_tare = tare;
+                }
+                hist::record(&mut self.timing.age, age);
+                (input, Some((w, age)))
+            }
+            Err(v) => {
+                if v == Verdict::Stale {
+                    self.stats.stale_ticks += 1;
+                }
+                if !self.servo.is_safe() {
+                    self.safe_reason = v as u32;
+                }
+                (input, None)
+            }
+        }
+    }
+
+    /// Commands: a tangent estimate asked for starts once the servo tracks (the lockstep
+    /// reference replays it at the same tick, `Replay::requested`), unless one started since.
+    fn take_commands(&mut self) {
+        while let Ok(Some(c)) = self.ports.command.receive() {
+            let c = *c.payload();
+            self.stats.commands += 1;
+            if c.version == afs_shared::msg::ServoCommand::VERSION
+                && Command::try_from(c.command) == Ok(Command::EstimateTangent)
+            {
+                self.estimate_wanted = Some(c.started_before);
+            } else {
+                self.stats.bad_commands += 1;
+            }
+        }
+        if let Some(before) = self.estimate_wanted {
+            if self.servo.counters().started > before {
+                self.estimate_wanted = None;
+            } else if self.servo.mode() == ServoMode::Track {
+                self.servo.request_tangent_estimate();
+                self.estimate_wanted = None;
+            }
+        }
+    }
+
+    /// The world snapshot first, then the world and controller samples: a servo killed
+    /// between the two leaves a tick its successor sends again, never one that is sent twice
+    /// with different contents.
+    fn publish(&mut self, now: u64, used: Option<(WrenchSample, u64)>) {
+        let mut p = PlantSample::of_tick(self.plant.truth(), self.seq, now);
+        let mut s = ServoSample::of_tick(&self.servo, self.seq, now, self.plant.time());
+        s.safe_reason = self.safe_reason;
+        if let Some((w, age)) = used {
+            s.flags |= ServoFlags::FORCE_VALID;
+            s.wrench_seq = w.seq;
+            s.wrench_sample_ns = w.sample_ns;
+            s.force_age_ns = age;
+        }
+        p.publish_ns = rt::monotonic_ns();
+        if let Some(world) = &self.ports.world {
+            world.write(self.snapshot(p));
+        }
+        if self.ports.plant.send_copy(p).is_err() {
+            self.stats.publish_failures += 1;
+        }
+        s.publish_ns = rt::monotonic_ns();
+        if self.ports.servo.send_copy(s).is_err() {
+            self.stats.publish_failures += 1;
+        }
+    }
+
+    /// What a restarted servo resumes from.
+    fn snapshot(&self, plant: PlantSample) -> WorldSnapshot {
+        WorldSnapshot {
+            version: WorldSnapshot::VERSION,
+            reserved: 0,
+            seq: plant.seq,
+            world: (&self.plant.state()).into(),
+            driver: self.driver.memo().into(),
+            controller: self.servo.state(),
+            gate: self.gate.counters(),
+            injected: self.injected,
+            plant,
+        }
+    }
+
+    /// Wake latency, execution time, misses; every 1000 ticks the statistics, and every 0.1 s
+    /// between requests the connections of ports that send rarely.
+    fn account(&mut self, now: u64, late: u64) {
+        let exec = rt::monotonic_ns().saturating_sub(now);
+        hist::record(&mut self.timing.wake, late);
+        hist::record(&mut self.timing.exec, exec);
+        self.stats.ticks += 1;
+        if late >= self.period_ns || exec >= self.period_ns {
+            self.stats.misses += 1;
+        }
+        if self.stats.ticks.is_multiple_of(1000) {
+            self.publish_stats();
+        } else if self.stats.ticks % 1000 == 500 && self.link.is_idle() {
+            // Drop the connections of an estimator that died (a file pair per dead server)
+            // and connect a restarted one. Without a change this only reads the service's
+            // port list; with one it maps or unmaps a segment, as the next send would.
+            self.link.update_connections();
+            self.startup.update_connections();
+        }
+    }
+
+    fn publish_stats(&mut self) {
+        self.stats.injected = self.injected;
+        publish_stats(
+            &mut self.stats,
+            &self.timing,
+            &self.gate,
+            &self.link,
+            &self.servo,
+            &self.ports.stats,
+        );
+    }
+
+    /// The last statistics, and the histograms saved if asked for.
+    pub(super) fn finish(mut self, histograms: Option<&std::path::Path>) -> Result<()> {
+        self.publish_stats();
+        if let Some(dir) = histograms {
+            self.timing.save(dir).context("saving the histograms")?;
+        }
+        Ok(())
+    }
+}
+
+/// The force samples' way in: the subscriber, the gate, and the count of injected samples.
+struct ForceInput<'a> {
+    ports: &'a Ports,
+    gate: &'a mut SampleGate,
+    injected: &'a mut GateCounters,
+}
+
+impl ForceInput<'_> {
+    /// Every new force sample through the gate, judged against the clock at receipt: the
+    /// sensor board outranks the servo on its core and may publish after this tick woke.
+    fn take(&mut self) {
+        while let Ok(Some(s)) = self.ports.wrench.receive() {
+            let w = s.payload();
+            let v = self.gate.offer(w, rt::monotonic_ns());
+            if w.flags.contains(WrenchFlags::INJECTED) {
+                self.injected.count(v);
+            }
+        }
+    }
+
+    /// Publishes the world's first sample `p0` and waits for the first good force sample.
+    /// None if stopped first.
+    fn wait(
+        &mut self,
+        p0: PlantSample,
+        args: &ServoArgs,
+        period_ns: u64,
+        startup: &mut Startup,
+        stop: &AtomicBool,
+    ) -> Result<Option<WrenchSample>> {
+        let t_wait = rt::monotonic_ns();
+        startup.report.prepared_ns = t_wait;
+        let _ = self.ports.plant.send_copy(p0);
+        startup.report.data_ns = Startup::now();
+        let mut next = t_wait;
+        loop {
+            if stop.load(Ordering::Relaxed) {
+                return Ok(None);
+            }
+            let now = rt::monotonic_ns();
+            let _ = self.ports.plant.update_connections();
+            // Judged against the clock at receipt, as in the tick: the sensor board may
+            // publish between the clock read above and this receive.
+            self.take();
+            if let Ok((w, _)) = self.gate.current(now) {
+                startup.report.input_ns = now;
+                return Ok(Some(w));
+            }
+            if now - t_wait > (args.startup_timeout_s * 1e9) as u64 {
+                bail!(
+                    "no force data within {:.1} s; is afs-sensor running with --prefix {}?",
+                    args.startup_timeout_s,
+                    args.prefix
+                );
+            }
+            next += period_ns;
+            rt::sleep_until(next);
+        }
+    }
+}
+
+/// The world's first sample: after a restart, the last tick of the previous servo, bit for
+/// bit as that one wrote it to the world blackboard before sending it (if it died between the
+/// two, the tick is delivered now; if not, subscribers recognise the repeat,
+/// docs/reliability.md); otherwise the world as it stands, tick `seq`.
+fn first_world_sample(plant: &Plant, snapshot: Option<&WorldSnapshot>, seq: u64) -> PlantSample {
+    match snapshot {
+        Some(s) if s.plant.version == PlantSample::VERSION && s.plant.seq == s.seq => s.plant,
+        _ => {
+            let now = rt::monotonic_ns();
+            let mut p = PlantSample::of_tick(plant.truth(), seq, now);
+            p.publish_ns = rt::monotonic_ns();
+            p
+        }
+    }
+}
+
+/// The controller built as the first servo's was (same start, so the same gains and
+/// stiffness), then given its predecessor's state, and the scenario driver where it was: a
+/// restarted servo carries on with the controller, not only with the world.
+fn controller(
+    scenario: &Scenario,
+    q0: afs_shared::math::Vec2,
+    first: &WrenchSample,
+    snapshot: Option<&WorldSnapshot>,
+    plant: &Plant,
+) -> Result<(ServoCore, ScenarioDriver)> {
+    let cfg = &scenario.cfg;
+    let tangent0 = cfg.surface.tangent_angle_at(cfg.start_u_m) + cfg.tangent_error_rad;
+    let mut wrench0 = first.wrench();
+    wrench0.force -= first.tare().force;
+    wrench0.torque -= first.tare().torque;
+    let new = |q| {
+        ServoCore::new(
+            cfg.servo,
+            cfg.plant.arm,
+            cfg.plant.elbow,
+            q,
+            wrench0,
+            tangent0,
+        )
+        .map_err(anyhow::Error::msg)
+    };
+    let mut servo = new(q0)?;
+    let mut driver = scenario.driver();
+    if let Some(s) = snapshot {
+        driver.resume(s.world.time_s, (&s.driver).into());
+        if let Err(e) = servo.restore(&s.controller) {
+            // The world carries on; the controller starts afresh from it.
+            eprintln!("afs-servo: warning: {e}; the controller starts afresh");
+            servo = new(plant.joints().0)?;
+        }
+    }
+    servo.set_tare(first.tare());
+    Ok((servo, driver))
+}

@@ -1,0 +1,327 @@
+//! The supervisor's loop (every 5 ms): the streams in (`streams`), the fault injector
+//! (`faults`), the children (reaped, restarted, killed when stalled), the status stream and the
+//! progress line (`progress`).
+
+mod faults;
+mod progress;
+mod streams;
+
+pub use streams::{Ports, Sinks};
+
+use super::child::{Ended, Launch, Proc};
+use crate::chaos::{Injector, LinkCut, ServoView};
+use crate::ipc;
+use crate::rt;
+use crate::stack::Footprint;
+use crate::tools::record::RecordSummary;
+use crate::tools::view::{LiveView, ViewSummary};
+use afs_shared::faults::FaultMonitor;
+use afs_shared::join::Joiner;
+use afs_shared::msg::{
+    self, Board, FrictionReport, LoopStats, ProcessState, SensorStats, WrenchSample,
+};
+use afs_shared::scenario::{Scenario, ScenarioMonitor};
+use anyhow::Result;
+use iceoryx2::port::update_connections::UpdateConnections;
+use serde::{Deserialize, Serialize};
+use std::io::IsTerminal;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+/// The first contact's transient is not a fault's: the normal force counts from here (s).
+const FAULT_SETTLE_S: f64 = 0.5;
+
+/// Why a run ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RunEnd {
+    /// The servo ran the scenario to its end (or to the run's duration).
+    Finished,
+    /// Stopped by a signal (SIGINT, SIGTERM).
+    Interrupted,
+    /// The wall-time limit passed first.
+    WallLimit,
+    /// The servo gave up (its restart limit).
+    ServoGaveUp,
+}
+
+impl RunEnd {
+    /// In words, for the report's check.
+    pub fn describe(self) -> &'static str {
+        match self {
+            RunEnd::Finished => "ran to its end",
+            RunEnd::Interrupted => "interrupted by a signal",
+            RunEnd::WallLimit => "stopped by the wall-time limit",
+            RunEnd::ServoGaveUp => "stopped: the servo gave up",
+        }
+    }
+}
+
+/// The wall time a run of `duration` simulated seconds gets by default (s): the duration
+/// plus generous start-up and restart slack.
+pub fn default_wall_limit_s(duration: f64) -> f64 {
+    duration * 1.5 + 30.0
+}
+
+/// A running stack under watch.
+pub struct Supervisor {
+    /// The processes of the graph.
+    pub procs: Vec<Proc>,
+    launch: Launch,
+    duration: f64,
+    /// The ports (the loop statistics are read once more after the stop).
+    pub ports: Ports,
+    sinks: Sinks,
+    /// The fault injector (`afs chaos`).
+    pub injector: Option<Injector>,
+    /// The commands that cut the link and restore it.
+    link_cut: Option<LinkCut>,
+    /// The scenario's figures from the samples.
+    pub monitor: ScenarioMonitor,
+    /// Safety figures.
+    pub faults: FaultMonitor,
+    /// The stack's footprint while steady before the first fault and after the last.
+    pub steady: [Option<Footprint>; 2],
+    /// The world and controller streams, joined.
+    pub joiner: Joiner,
+    /// The servo loop's newest statistics.
+    pub stats: Option<LoopStats>,
+    /// The sensor board's newest statistics.
+    pub sensor_stats: Option<SensorStats>,
+    /// The estimator's newest friction report.
+    pub friction: Option<FrictionReport>,
+    /// Why the run ended (None while it runs).
+    pub end: Option<RunEnd>,
+    /// Wall time the run may take before the supervisor stops it.
+    wall_limit: Duration,
+    /// Force samples received.
+    pub wrench_received: u64,
+    progress: bool,
+    t0: Instant,
+    /// When each board's data last arrived (servo: world samples; sensor: genuine force
+    /// samples; estimator: friction reports), for the stall policy.
+    last_data: [Instant; 3],
+    last_status: Instant,
+    last_progress: Instant,
+    status_seq: u64,
+    command_seq: u64,
+    last_time_s: f64,
+    servo_view: ServoView,
+    /// The first tick of a restarted servo (None until its first sample arrives).
+    servo_resumes_at: Option<u64>,
+    genuine: Option<WrenchSample>,
+    scenario_name: &'static str,
+}
+
+impl Supervisor {
+    /// A supervisor of `procs` (not started yet) running `scenario` for `duration` simulated
+    /// seconds, without recording, faults or progress line (see the methods below).
+    pub fn new(
+        procs: Vec<Proc>,
+        launch: Launch,
+        scenario: &Scenario,
+        duration: f64,
+        ports: Ports,
+    ) -> Self {
+        let now = Instant::now();
+        Self {
+            procs,
+            launch,
+            duration,
+            ports,
+            sinks: Sinks::default(),
+            injector: None,
+            link_cut: None,
+            monitor: scenario.monitor(),
+            faults: FaultMonitor::new(scenario.cfg.servo.hybrid.preload_n, FAULT_SETTLE_S),
+            steady: [None, None],
+            joiner: Joiner::default(),
+            stats: None,
+            sensor_stats: None,
+            friction: None,
+            end: None,
+            wall_limit: Duration::from_secs_f64(default_wall_limit_s(duration)),
+            wrench_received: 0,
+            progress: false,
+            t0: now,
+            last_data: [now; 3],
+            last_status: now,
+            last_progress: now,
+            status_seq: 0,
+            command_seq: 0,
+            last_time_s: 0.0,
+            servo_view: ServoView::default(),
+            servo_resumes_at: None,
+            genuine: None,
+            scenario_name: scenario.kind.name(),
+        }
+    }
+
+    /// Stops the run after `limit` of wall time (its report then fails `reached_end`).
+    pub fn with_wall_limit(self, limit: Duration) -> Self {
+        Self {
+            wall_limit: limit,
+            ..self
+        }
+    }
+
+    /// Records every topic and shows them live with `sinks`.
+    pub fn with_sinks(self, sinks: Sinks) -> Self {
+        Self { sinks, ..self }
+    }
+
+    /// Injects faults with `injector`.
+    pub fn injecting(self, injector: Option<Injector>) -> Self {
+        Self { injector, ..self }
+    }
+
+    /// Cuts the link with `link_cut`'s commands when the injector asks.
+    pub fn cutting_with(self, link_cut: Option<LinkCut>) -> Self {
+        Self { link_cut, ..self }
+    }
+
+    /// Prints a progress line on stderr when `progress`.
+    pub fn with_progress(self, progress: bool) -> Self {
+        Self { progress, ..self }
+    }
+
+    fn proc_mut(&mut self, b: Board) -> Option<&mut Proc> {
+        self.procs.iter_mut().find(|p| p.board == Some(b))
+    }
+
+    /// Starts the graph and watches it until the scenario ends, `stop` is set, the servo
+    /// gives up, or the wall-clock limit passes.
+    pub fn run(&mut self, stop: &AtomicBool) -> Result<()> {
+        self.t0 = Instant::now();
+        // Servo first (it publishes the world the sensor samples), then the others.
+        for b in Board::ALL {
+            if let Some(p) = self.procs.iter_mut().find(|p| p.board == Some(b)) {
+                p.spawn(&self.launch, false)?;
+            }
+        }
+        for p in self
+            .procs
+            .iter_mut()
+            .filter(|p| p.state == ProcessState::Starting)
+        {
+            p.spawn(&self.launch, false)?;
+        }
+        let tty = std::io::stderr().is_terminal();
+        let limit = self.wall_limit;
+        loop {
+            std::thread::sleep(Duration::from_millis(5));
+            if stop.load(Ordering::Relaxed) {
+                self.end = Some(RunEnd::Interrupted);
+                break;
+            }
+            self.poll_streams();
+            // The supervisor's own publishers send rarely (status) or on demand (commands):
+            // drop their connections to subscribers that died (a killed servo's) as soon as
+            // iceoryx2 has cleaned them; without a change this compares a counter.
+            let _ = self.ports.status.update_connections();
+            let _ = self.ports.command.update_connections();
+            self.inject();
+            if self.watch_children() {
+                self.end = Some(RunEnd::Finished);
+                break;
+            }
+            let servo_failed = self
+                .procs
+                .iter()
+                .any(|p| p.board == Some(Board::Servo) && p.state == ProcessState::Failed);
+            if servo_failed {
+                self.end = Some(RunEnd::ServoGaveUp);
+                break;
+            }
+            if self.t0.elapsed() > limit {
+                eprintln!(
+                    "afs: the scenario did not end within {:.1} s of wall time (the wall-time limit); stopping",
+                    limit.as_secs_f64()
+                );
+                self.end = Some(RunEnd::WallLimit);
+                break;
+            }
+            self.publish_status();
+            self.print_progress(tty);
+        }
+        if self.progress && tty {
+            eprintln!();
+        }
+        self.drain();
+        Ok(())
+    }
+
+    /// Reaps, restarts and stall-kills the children; true once the servo finished.
+    fn watch_children(&mut self) -> bool {
+        let now = Instant::now();
+        let at_s = self.t0.elapsed().as_secs_f64();
+        let prefix = self.launch.prefix.clone();
+        let mut servo_done = false;
+        for p in self.procs.iter_mut() {
+            if let Some(st) = p.try_reap() {
+                // Its node is dead: remove its stale resources before anything replaces it.
+                let ended = p.ended(st, now, at_s, rt::monotonic_ns(), || {
+                    let _ = ipc::census(&prefix, true);
+                });
+                servo_done |= ended == Ended::ServoFinished;
+                continue;
+            }
+            if let Some(b) = p.board {
+                p.kill_if_stalled(now, self.last_data[b as usize]);
+            }
+            if p.restart_due(now) {
+                if p.board == Some(Board::Servo) {
+                    self.servo_resumes_at = None;
+                }
+                p.restart(&self.launch);
+                // The new process gets its own start-up grace before stall checks.
+                if let Some(b) = p.board {
+                    self.last_data[b as usize] = Instant::now();
+                }
+            }
+        }
+        servo_done
+    }
+
+    /// Stops the graph in order: the servo first (it holds the world), then the estimator and
+    /// the sensor, then the rest. Reads the servo's last statistics. Returns the wall time the
+    /// run took (s).
+    pub fn shut_down(&mut self) -> f64 {
+        let wall_s = self.t0.elapsed().as_secs_f64();
+        // A cut outlasting the run is restored first: the link is the machine's, not the run's.
+        if let (Some(inj), Some(c)) = (self.injector.as_mut(), self.link_cut.as_mut())
+            && inj.cutting()
+        {
+            inj.note("restored at the run's end");
+            for e in c.restore_now() {
+                eprintln!("afs: warning: {e}");
+                inj.note(&e);
+            }
+        }
+        // Observers (`afs view`) leave on this, before the prefix is released.
+        self.send_status(msg::SupervisorPhase::Stopping);
+        for b in [Board::Servo, Board::Estimator, Board::Sensor] {
+            if let Some(p) = self.proc_mut(b) {
+                p.stop(Duration::from_secs(2));
+            }
+        }
+        for p in self.procs.iter_mut() {
+            p.stop(Duration::from_secs(2));
+        }
+        // The servo's and the sensor's last words.
+        while let Ok(Some(s)) = self.ports.stats.receive() {
+            self.stats = Some(*s.payload());
+        }
+        while let Ok(Some(s)) = self.ports.sensor_stats.receive() {
+            self.sensor_stats = Some(*s.payload());
+        }
+        wall_s
+    }
+
+    /// Ends the recording and the live view, if any.
+    pub fn finish_sinks(&mut self) -> Result<(Option<RecordSummary>, Option<ViewSummary>)> {
+        let view = self.sinks.view.take().map(LiveView::finish);
+        let record = self.sinks.recorder.take().map(|r| r.finish()).transpose()?;
+        Ok((record, view))
+    }
+}

@@ -1,0 +1,242 @@
+//! The streams the supervisor reads (world, controller and force samples, statistics, start-up
+//! reports, friction) and writes (status, commands), and where its samples go besides its own
+//! checks: the recording and the live view.
+
+use super::Supervisor;
+use crate::chaos::ServoView;
+use crate::ipc::{self, Svc};
+use crate::rt;
+use crate::tools::record::Recorder;
+use crate::tools::topics::{self, Rec};
+use crate::tools::view::LiveView;
+use afs_shared::msg::{
+    Board, BoardStartup, FrictionReport, LoopStats, PlantSample, ProcessState, SensorStats,
+    ServoCommand, ServoSample, SupervisorStatus, WrenchFlags, WrenchSample,
+};
+use afs_shared::servo::ServoMode;
+use anyhow::{Context, Result};
+use iceoryx2::node::Node;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use std::time::Instant;
+
+/// The ports the supervisor reads and writes.
+pub struct Ports {
+    pub(super) plant: Subscriber<Svc, PlantSample, ()>,
+    pub(super) servo: Subscriber<Svc, ServoSample, ()>,
+    pub(super) wrench: Subscriber<Svc, WrenchSample, ()>,
+    /// The servo loop's statistics.
+    pub stats: Subscriber<Svc, LoopStats, ()>,
+    /// The sensor board's statistics.
+    pub sensor_stats: Subscriber<Svc, SensorStats, ()>,
+    pub(super) friction: Subscriber<Svc, FrictionReport, ()>,
+    pub(super) startup: Subscriber<Svc, BoardStartup, ()>,
+    pub(super) status: Publisher<Svc, SupervisorStatus, ()>,
+    pub(super) command: Publisher<Svc, ServoCommand, ()>,
+}
+
+impl Ports {
+    /// Opens them on the supervisor's node.
+    pub fn open(node: &Node<Svc>) -> Result<Self> {
+        Ok(Self {
+            plant: ipc::plant(node)?
+                .subscriber_builder()
+                .buffer_size(ipc::TICK_BUFFER)
+                .create()
+                .context("creating the plant subscriber")?,
+            servo: ipc::servo(node)?
+                .subscriber_builder()
+                .buffer_size(ipc::TICK_BUFFER)
+                .create()
+                .context("creating the servo subscriber")?,
+            wrench: ipc::wrench(node)?
+                .subscriber_builder()
+                .buffer_size(ipc::WRENCH_BUFFER)
+                .create()
+                .context("creating the wrench subscriber")?,
+            stats: ipc::loop_stats(node)?
+                .subscriber_builder()
+                .create()
+                .context("creating the loop-statistics subscriber")?,
+            sensor_stats: ipc::sensor_stats(node)?
+                .subscriber_builder()
+                .create()
+                .context("creating the sensor-statistics subscriber")?,
+            friction: ipc::friction(node)?
+                .subscriber_builder()
+                .create()
+                .context("creating the friction subscriber")?,
+            startup: ipc::startup(node)?
+                .subscriber_builder()
+                .create()
+                .context("creating the start-up subscriber")?,
+            status: ipc::supervisor(node)?
+                .publisher_builder()
+                .create()
+                .context("creating the status publisher")?,
+            command: ipc::command(node)?
+                .publisher_builder()
+                .create()
+                .context("creating the command publisher")?,
+        })
+    }
+}
+
+/// Where the supervisor's samples go besides its own checks: the recording and the live view.
+/// Neither can block the supervisor (both hand over through channels that drop when full).
+#[derive(Default)]
+pub struct Sinks {
+    /// The MCAP recording (`--record`).
+    pub recorder: Option<Recorder>,
+    /// The Foxglove view (`--foxglove`).
+    pub view: Option<LiveView>,
+}
+
+impl Sinks {
+    pub(super) fn any(&self) -> bool {
+        self.recorder.is_some() || self.view.is_some()
+    }
+
+    pub(super) fn push(&mut self, r: Rec) {
+        if let Some(x) = self.recorder.as_mut() {
+            x.push(r);
+        }
+        if let Some(v) = self.view.as_mut() {
+            v.push(r);
+        }
+    }
+}
+
+impl Supervisor {
+    /// Reads every stream: world and controller samples (joined, monitored, recorded), force
+    /// samples, start-up reports, loop statistics, friction reports.
+    pub(super) fn poll_streams(&mut self) {
+        while let Ok(Some(s)) = self.ports.plant.receive() {
+            let p = *s.payload();
+            self.last_data[Board::Servo as usize] = Instant::now();
+            self.servo_sample_seen(&p);
+            if self.joiner.is_repeat(&p) {
+                continue;
+            }
+            self.last_time_s = p.time_s;
+            self.sinks.push(Rec::Plant(p));
+            self.joiner.push_plant(p);
+        }
+        while let Ok(Some(s)) = self.ports.servo.receive() {
+            let v = *s.payload();
+            self.servo_view = ServoView {
+                mode: ServoMode::try_from(v.mode).ok(),
+                started: v.estimations_started,
+            };
+            self.sinks.push(Rec::Servo(v));
+            self.joiner.push_servo(v);
+        }
+        self.pair();
+        while let Ok(Some(s)) = self.ports.wrench.receive() {
+            let w = *s.payload();
+            self.wrench_received += 1;
+            if !w.flags.contains(WrenchFlags::INJECTED) {
+                let now = Instant::now();
+                self.last_data[Board::Sensor as usize] = now;
+                let new_epoch = self.genuine.is_none_or(|g| w.epoch_ns != g.epoch_ns);
+                self.genuine = Some(w);
+                if new_epoch
+                    && let Some(sn) = self.proc_mut(Board::Sensor)
+                    && sn.state == ProcessState::Running
+                {
+                    sn.data_flowing(now, rt::monotonic_ns());
+                }
+            }
+            self.sinks.push(Rec::Wrench(w));
+        }
+        while let Ok(Some(s)) = self.ports.startup.receive() {
+            let r = *s.payload();
+            if let Some(p) = self
+                .procs
+                .iter_mut()
+                .find(|p| p.state == ProcessState::Running && p.pid() == r.pid)
+            {
+                p.started_up(&r);
+                // The estimator has no stream of its own: it serves once its ports are open.
+                if p.board == Some(Board::Estimator) && p.data_since.is_none() {
+                    p.data_flowing(Instant::now(), rt::monotonic_ns());
+                }
+            }
+        }
+        while let Ok(Some(s)) = self.ports.sensor_stats.receive() {
+            self.sensor_stats = Some(*s.payload());
+            self.sinks.push(Rec::SensorStats(*s.payload()));
+        }
+        while let Ok(Some(s)) = self.ports.stats.receive() {
+            self.stats = Some(*s.payload());
+            self.sinks.push(Rec::Stats(*s.payload()));
+        }
+        while let Ok(Some(s)) = self.ports.friction.receive() {
+            self.last_data[Board::Estimator as usize] = Instant::now();
+            self.friction = Some(*s.payload());
+            self.sinks.push(Rec::Friction(*s.payload()));
+        }
+    }
+
+    /// A world sample arrived: it may be a (restarted) servo's data starting to flow. A
+    /// restarted servo's first sample is its predecessor's last tick again (from the snapshot
+    /// it resumes): its own ticks, and the world going on, start at the next one.
+    fn servo_sample_seen(&mut self, p: &PlantSample) {
+        let now = Instant::now();
+        let Some(sv) = self
+            .procs
+            .iter_mut()
+            .find(|q| q.board == Some(Board::Servo))
+        else {
+            return;
+        };
+        if sv.data_since.is_some() || sv.state != ProcessState::Running {
+            return;
+        }
+        let flowing = sv.restarts == 0 || {
+            let first = *self.servo_resumes_at.get_or_insert_with(|| {
+                self.faults.servo_restarted_at(p.seq + 1);
+                self.monitor.servo_restarted_at(p.seq + 1);
+                p.seq + 1
+            });
+            p.seq >= first
+        };
+        if flowing {
+            sv.data_flowing(now, rt::monotonic_ns());
+        }
+    }
+
+    /// Feeds the ticks with both samples to the monitors.
+    fn pair(&mut self) {
+        let (monitor, faults, sinks) = (&mut self.monitor, &mut self.faults, &mut self.sinks);
+        let live = sinks.any();
+        self.joiner.pairs(|p, s| {
+            monitor.push(p, s);
+            faults.push(p, s);
+            if live && let Some(r) = topics::live(p, s) {
+                sinks.push(r);
+            }
+        });
+    }
+
+    /// One step of the fault injector, and what it asks for.
+    /// What is still in flight after the loop.
+    pub(super) fn drain(&mut self) {
+        while let Ok(Some(s)) = self.ports.plant.receive() {
+            let p = *s.payload();
+            if self.joiner.is_repeat(&p) {
+                continue;
+            }
+            self.sinks.push(Rec::Plant(p));
+            self.joiner.push_plant(p);
+        }
+        while let Ok(Some(s)) = self.ports.servo.receive() {
+            self.sinks.push(Rec::Servo(*s.payload()));
+            self.joiner.push_servo(*s.payload());
+        }
+        self.pair();
+        while let Ok(Some(s)) = self.ports.friction.receive() {
+            self.friction = Some(*s.payload());
+        }
+    }
+}

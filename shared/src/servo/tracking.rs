@@ -1,0 +1,290 @@
+//! Surface tracking on demand and on its own (thesis §5.3.2): the fast loop's modes, what
+//! starts an estimation (a request, the normal force leaving its band, the set-point drifting
+//! against the travel, the travel itself), the probe run and the estimator's answer, and the
+//! tracker's memory between estimations ([`TrackState`]).
+
+use super::ServoCore;
+use crate::tangent::{ProbePlan, ProbeSample, TangentOutcome};
+use iceoryx2_bb_derive_macros::ZeroCopySend;
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
+use serde::{Deserialize, Serialize};
+
+wire_code! {
+    /// What the fast loop is doing (its wire code: 0 track, 1 stopping, 2 probing, 3 awaiting
+    /// estimate, 4 resuming).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+    #[serde(rename_all = "snake_case")]
+    pub enum ServoMode {
+        /// Hybrid control along the estimated tangent.
+        #[default]
+        Track = 0,
+        /// Decelerating to a stop before probing.
+        Stopping = 1,
+        /// Running tangent-probe strokes.
+        Probing = 2,
+        /// Strokes done; holding the preload until the estimate arrives.
+        AwaitingEstimate = 3,
+        /// Estimate applied; holding until the normal force is back at the preload, then
+        /// moving on.
+        Resuming = 4,
+    }
+}
+
+wire_code! {
+    /// Why an estimation started (its code in [`ServoState::last_trigger`]; 0 is none).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+    #[serde(rename_all = "snake_case")]
+    pub enum Trigger {
+        /// Asked for by the caller.
+        Request = 1,
+        /// The normal force left its band.
+        Force = 2,
+        /// The normal set-point drifted against the travel.
+        Slope = 3,
+        /// Periodic, by travel.
+        Travel = 4,
+    }
+}
+
+/// A finished probe run waiting for the estimator.
+#[derive(Debug, Clone, Copy)]
+pub struct ProbeRequest<'a> {
+    /// The plan that ran.
+    pub plan: &'a ProbePlan,
+    /// Estimated tangent angle the offsets refer to (rad).
+    pub base_angle: f64,
+    /// Recorded samples.
+    pub samples: &'a [ProbeSample],
+    /// True when this run is a re-probe.
+    pub reprobe: bool,
+}
+
+wire_struct! {
+    /// Counters of the tangent estimation.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend, Serialize, Deserialize)]
+    #[type_name("afs::EstimationCounters")]
+    pub struct EstimationCounters {
+        /// Estimations started.
+        pub started: u32,
+        /// Of those, asked for by the caller ([`ServoCore::request_tangent_estimate`]).
+        pub requested: u32,
+        /// Accepted estimates.
+        pub estimates: u32,
+        /// Re-probes asked for.
+        pub reprobes: u32,
+        /// Failed estimations (tangent kept).
+        pub failures: u32,
+        /// Started by the force limit.
+        pub force_triggers: u32,
+        /// Started by the set-point drift.
+        pub slope_triggers: u32,
+        /// Estimations abandoned because the force data was lost mid-probe.
+        pub aborted: u32,
+        /// Entries into the safe state.
+        pub safe_entries: u32,
+        /// Reserved (0).
+        #[serde(skip)]
+        pub reserved: u32,
+    }
+}
+
+wire_struct! {
+    /// The tracker's memory between estimations (a part of [`super::ServoState`]).
+    #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
+    #[type_name("afs::TrackState")]
+    pub struct TrackState {
+        /// Velocity to go back to after an estimation (m/s).
+        pub resume_velocity_m_per_s: f64,
+        /// Filtered dither-period mean of the normal force (N).
+        pub normal_filtered_n: f64,
+        /// Travel since the last accepted estimate (m).
+        pub odometer_m: f64,
+        /// Travel in all (m).
+        pub odometer_total_m: f64,
+        /// Curvature fed forward (1/m).
+        pub curvature_per_m: f64,
+        /// The angle it turns from (rad).
+        pub curve_base_rad: f64,
+        /// Low-passed tangent error the force loop is absorbing (rad).
+        pub drift_rad: f64,
+        /// Time stopped (s).
+        pub stopped_s: f64,
+        /// Time the normal force has been back at the preload while stopped (s).
+        pub settled_s: f64,
+    }
+}
+
+impl ServoCore {
+    /// Starts a tangent estimation: stop, then probe (thesis §5.3.2). Ignored unless tracking.
+    pub fn request_tangent_estimate(&mut self) {
+        if self.mode == ServoMode::Track {
+            self.begin_estimation(Trigger::Request);
+        }
+    }
+
+    pub(super) fn begin_estimation(&mut self, why: Trigger) {
+        self.counters.started += 1;
+        match why {
+            Trigger::Request => self.counters.requested += 1,
+            Trigger::Force => self.counters.force_triggers += 1,
+            Trigger::Slope => self.counters.slope_triggers += 1,
+            Trigger::Travel => {}
+        }
+        self.last_trigger = Some(why);
+        self.track.stopped_s = 0.0;
+        self.track.settled_s = 0.0;
+        self.track.resume_velocity_m_per_s = self.hybrid.velocity_target();
+        self.hybrid.set_velocity(0.0);
+        self.mode = ServoMode::Stopping;
+    }
+
+    /// The finished probe run, while the servo waits for its estimate.
+    pub fn pending_probe(&self) -> Option<ProbeRequest<'_>> {
+        (self.mode == ServoMode::AwaitingEstimate).then(|| ProbeRequest {
+            plan: self.probe.plan(),
+            base_angle: self.probe.base_angle(),
+            samples: self.probe.samples(),
+            reprobe: self.reprobe,
+        })
+    }
+
+    /// Applies the estimator's answer: feed the new tangent forward and resume, run the
+    /// re-probe plan, or keep the old tangent and resume.
+    pub fn apply_tangent_outcome(&mut self, outcome: &TangentOutcome) {
+        if self.mode != ServoMode::AwaitingEstimate {
+            return;
+        }
+        self.last_outcome = Some(*outcome);
+        match outcome {
+            TangentOutcome::Estimate(e) => {
+                self.counters.estimates += 1;
+                let t = self.params.tracking;
+                let angle = e.tangent_angle_rad;
+                self.track.curvature_per_m = match self.last_estimate {
+                    Some((prev, at)) if t.curvature_feedforward => {
+                        let ds = self.track.odometer_total_m - at;
+                        let dth = crate::math::wrap_angle(angle - prev);
+                        let corner = dth.abs() > t.corner_angle_deg.to_radians()
+                            || self.last_trigger == Some(Trigger::Force)
+                            || ds <= 1e-3
+                            || (dth / ds).abs() > t.max_curvature_per_m;
+                        if corner { 0.0 } else { dth / ds }
+                    }
+                    _ => 0.0,
+                };
+                self.last_estimate = Some((angle, self.track.odometer_total_m));
+                self.track.curve_base_rad = angle;
+                self.track.odometer_m = 0.0;
+                self.track.drift_rad = 0.0;
+                self.hybrid.set_tangent(angle);
+                self.resume();
+            }
+            TangentOutcome::Reprobe { plan, .. } => {
+                self.counters.reprobes += 1;
+                self.reprobe = true;
+                let plan = self.plan_with_dither(*plan);
+                self.probe.start(plan, self.hybrid.frame().tangent_angle);
+                self.mode = ServoMode::Probing;
+            }
+            TangentOutcome::Failed(_) => {
+                self.counters.failures += 1;
+                self.resume();
+            }
+        }
+    }
+
+    /// Gives up waiting for the estimator (it did not answer): keeps the old tangent, counts a
+    /// failure and resumes tracking.
+    pub fn give_up_estimate(&mut self) {
+        if self.mode == ServoMode::AwaitingEstimate {
+            self.counters.failures += 1;
+            self.resume();
+        }
+    }
+
+    pub(super) fn plan_with_dither(&self, mut plan: ProbePlan) -> ProbePlan {
+        plan.dither_hz = if self.dither.amplitude() > 0.0 {
+            self.params.dither.frequency_hz
+        } else {
+            0.0
+        };
+        plan
+    }
+
+    pub(super) fn resume(&mut self) {
+        self.probe.reset();
+        self.reprobe = false;
+        self.track.stopped_s = 0.0;
+        self.track.settled_s = 0.0;
+        self.mode = ServoMode::Resuming;
+    }
+
+    /// While stopped with the force loop on: true once the dither-period mean of the normal force
+    /// has stayed within 5 % of the preload for the probe hold time, or after 3 s.
+    pub(super) fn force_settled(&mut self, dt: f64) -> bool {
+        self.track.stopped_s += dt;
+        let preload = self.hybrid.params().preload_n;
+        if (self.track.normal_filtered_n - preload).abs() < 0.05 * preload {
+            self.track.settled_s += dt;
+        } else {
+            self.track.settled_s = 0.0;
+        }
+        self.track.settled_s >= self.params.tangent.settle_s || self.track.stopped_s > 3.0
+    }
+
+    pub(super) fn check_triggers(&mut self, dt: f64, normal: f64) {
+        let t = self.params.tracking;
+        // Odometer, curvature feedforward and the drift the force loop absorbs.
+        let v = self.hybrid.nominal_velocity();
+        if self.mode == ServoMode::Track && v != 0.0 {
+            let ds = v.abs() * dt;
+            self.track.odometer_m += ds;
+            self.track.odometer_total_m += ds;
+            if t.curvature_feedforward && self.track.curvature_per_m != 0.0 {
+                let angle = self.track.curve_base_rad
+                    + self.track.curvature_per_m * self.track.odometer_m * v.signum();
+                self.hybrid.set_tangent(angle);
+            }
+        }
+        let preload = self.hybrid.params().preload_n;
+        self.normal_window.push(normal);
+        let period_mean = self.normal_window.mean();
+        if self.mode == ServoMode::Track && v != 0.0 {
+            // The set-point rate for the dither-period mean force: free of the dither's ripple.
+            let window_s = t.slope_window_m / v.abs();
+            let instant = (self.hybrid.depth_rate_for(period_mean) / v).atan();
+            self.track.drift_rad +=
+                (dt / window_s.max(dt)).min(1.0) * (instant - self.track.drift_rad);
+        }
+        if t.force_filter_s > 0.0 {
+            self.track.normal_filtered_n +=
+                (dt / t.force_filter_s).min(1.0) * (period_mean - self.track.normal_filtered_n);
+        } else {
+            self.track.normal_filtered_n = period_mean;
+        }
+        let deviation = (self.track.normal_filtered_n - preload).abs() / preload;
+        if deviation < 0.5 * t.force_trigger_fraction {
+            self.force_armed = true;
+        }
+        if !t.enabled || self.mode != ServoMode::Track || self.hybrid.velocity_target() == 0.0 {
+            return;
+        }
+        if self.force_armed
+            && deviation > t.force_trigger_fraction
+            && self.track.odometer_m >= t.min_travel_m
+        {
+            self.force_armed = false;
+            self.begin_estimation(Trigger::Force);
+            return;
+        }
+        let travel = self.track.odometer_m;
+        if travel < t.min_travel_m.max(t.slope_window_m) {
+            return;
+        }
+        if self.track.drift_rad.abs() > t.slope_trigger_deg.to_radians() {
+            self.begin_estimation(Trigger::Slope);
+        } else if t.max_travel_m > 0.0 && travel > t.max_travel_m {
+            self.begin_estimation(Trigger::Travel);
+        }
+    }
+}
