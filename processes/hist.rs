@@ -4,7 +4,7 @@
 //! summarised as the percentiles the JSON reports carry.
 
 use anyhow::{Context, Result};
-use hdrhistogram::Histogram;
+pub use hdrhistogram::Histogram;
 use hdrhistogram::serialization::{Deserializer, Serializer, V2Serializer};
 use serde::{Deserialize, Serialize};
 use std::io::Write;

@@ -8,13 +8,15 @@
 //! | `supervisor/` | `afs run` and `afs status`: children, restart policy, the watch loop, footprint, report |
 //! | `chaos/` | `afs chaos`: the fault plan's spans, the injector, the bad samples, the report |
 //! | `stack/` | the stack file and its types, a restart's timeline, a stack's footprint: below both the supervisor and chaos |
-//! | `tools/` | `afs bench`, `afs experiment`, recording, plots and export |
+//! | `tools/` | `afs bench`, `afs experiment`, plots, `afs sensor` |
+//! | `observe/` | what watches a running stack: recording and export, the live view, following |
 //! | `ipc`, `rt`, `hist`, `procfs` | iceoryx2 services, real-time set-up, latency histograms, `/proc` |
 
 pub mod boards;
 pub mod chaos;
 pub mod hist;
 pub mod ipc;
+pub mod observe;
 pub mod procfs;
 pub mod rt;
 pub mod stack;

@@ -45,6 +45,12 @@ fn bench_all_reports_every_series() {
                 "bare_iceoryx2_poll_oneway",
                 "unix_socket_rtt",
                 "unix_socket_oneway",
+                "upstream_threads_oneway",
+                "upstream_processes_oneway",
+                "upstream_processes_touch_oneway",
+                "upstream_processes_touch_clock_oneway",
+                "upstream_processes_touch_clock_pause_oneway",
+                "upstream_processes_touch_clock_pause_late_oneway",
             ],
         ),
         ("loop", &["bare_loop_wake", "servo_wake"]),
@@ -94,6 +100,12 @@ fn bench_all_reports_every_series() {
         h["afs_poll_rtt"].summary_us.count, h["unix_socket_rtt"].summary_us.count,
         "every hop series has the same sample count"
     );
+    // Upstream's method: one figure per round (a batch's total / 2n), as many in each.
+    let rounds = r.hop.as_ref().unwrap().rounds as u64;
+    assert!(rounds > 0);
+    for n in h.keys().filter(|n| n.starts_with("upstream_")) {
+        assert_eq!(h[n].summary_us.count, rounds, "{n}");
+    }
     let s = r.stack.as_ref().unwrap();
     assert!(s.runs.with_viewer.viewer && s.runs.with_viewer.stack_runs == 2);
     assert!(

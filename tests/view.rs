@@ -5,10 +5,10 @@
 //!
 //! Stack tests run one at a time (a lock) with their own prefixes; none asserts a run time.
 
-use afs::tools::record;
-use afs::tools::topics::{TOPICS, json_schema};
-use afs::tools::view::ViewSummary;
-use afs::tools::view_client::{Received, ViewClient};
+use afs::observe::record;
+use afs::observe::topics::{TOPICS, json_schema};
+use afs::observe::view::ViewSummary;
+use afs::observe::view_client::{Received, ViewClient};
 use serde_json::Value;
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};

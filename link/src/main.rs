@@ -203,47 +203,7 @@ fn run(cli: &Cli) -> Result<Summary> {
         side: Some(cli.side),
         ..Default::default()
     };
-    let epoch = afs::rt::monotonic_ns();
-    let mut packer = Packer::new(epoch);
-    let mut sample_latency = afs::hist::new()?;
-    let mut batch_latency = afs::hist::new()?;
-    let (servo_sub, batch_pub, batch_sub, servo_pub) = match cli.side {
-        Side::Controller => (
-            Some(
-                ipc::servo(&node)?
-                    .subscriber_builder()
-                    .buffer_size(ipc::TICK_BUFFER)
-                    .create()
-                    .context("servo subscriber")?,
-            ),
-            Some(
-                ipc::link_servo(&node)?
-                    .publisher_builder()
-                    .backpressure_strategy(ipc::BACKPRESSURE)
-                    .create()
-                    .context("batch publisher")?,
-            ),
-            None,
-            None,
-        ),
-        Side::Remote => (
-            None,
-            None,
-            Some(
-                ipc::link_servo(&node)?
-                    .subscriber_builder()
-                    .create()
-                    .context("batch subscriber")?,
-            ),
-            Some(
-                ipc::servo(&node)?
-                    .publisher_builder()
-                    .backpressure_strategy(ipc::BACKPRESSURE)
-                    .create()
-                    .context("servo publisher")?,
-            ),
-        ),
-    };
+    let mut ends = Ends::open(&node, cli.side)?;
     let mut last_discovery = Instant::now() - Duration::from_secs(1);
     let mut last_warning = Instant::now() - Duration::from_secs(10);
     let mut warn = |what: &str, e: &dyn std::fmt::Debug| {
@@ -262,18 +222,7 @@ fn run(cli: &Cli) -> Result<Summary> {
         }
         let _ = listener.try_wait(|_| {});
         sum.waiting_s += t.elapsed().as_secs_f64();
-        if let (Some(sub), Some(publ)) = (&servo_sub, &batch_pub) {
-            let mut got = false;
-            while let Ok(Some(s)) = sub.receive() {
-                got = true;
-                sum.servo_read += 1;
-                packer.push(s.payload(), |b| send_batch(publ, b, &mut sum.batches_sent));
-            }
-            if !got {
-                // The stream paused (or ended): send what is packed.
-                packer.flush(|b| send_batch(publ, b, &mut sum.batches_sent));
-            }
-        }
+        ends.pack(&mut sum);
         if last_discovery.elapsed() >= Duration::from_millis(100) {
             last_discovery = Instant::now();
             if let Err(e) = link.discover() {
@@ -281,12 +230,7 @@ fn run(cli: &Cli) -> Result<Summary> {
                 warn("discovery", &e);
             }
             sum.discovery_s += last_discovery.elapsed().as_secs_f64();
-            for p in [&batch_pub].into_iter().flatten() {
-                let _ = p.update_connections();
-            }
-            for p in [&servo_pub].into_iter().flatten() {
-                let _ = p.update_connections();
-            }
+            ends.update_connections();
         }
         let t = Instant::now();
         if let Err(e) = link.propagate() {
@@ -295,37 +239,145 @@ fn run(cli: &Cli) -> Result<Summary> {
         }
         sum.propagation_s += t.elapsed().as_secs_f64();
         sum.rounds += 1;
-        if let (Some(sub), Some(publ)) = (&batch_sub, &servo_pub) {
-            while let Ok(Some(b)) = sub.receive() {
-                let now = afs::rt::monotonic_ns();
-                afs::hist::record(
-                    &mut batch_latency,
-                    now.saturating_sub(b.payload().publish_ns),
-                );
-                sum.unpacked.push(b.payload(), |s| {
-                    if publ.send_copy(*s).is_ok() {
-                        sum.servo_published += 1;
-                        afs::hist::record(&mut sample_latency, now.saturating_sub(s.publish_ns));
-                    }
-                });
-            }
-        }
+        ends.unpack(&mut sum);
     }
     // Stopping: send what is packed and give the tunnel a moment to carry it.
-    if let Some(publ) = &batch_pub {
-        packer.flush(|b| send_batch(publ, b, &mut sum.batches_sent));
+    if ends.flush(&mut sum) {
         for _ in 0..50 {
             let _ = link.propagate();
             std::thread::sleep(Duration::from_millis(2));
         }
     }
-    sum.servo_seen = packer.seen().clone();
-    if !sample_latency.is_empty() {
-        sum.sample_latency_us = Some(afs::hist::QuantilesUs::of(&sample_latency));
-        sum.batch_latency_us = Some(afs::hist::QuantilesUs::of(&batch_latency));
+    sum.servo_seen = ends.packer.seen().clone();
+    if !ends.sample_latency.is_empty() {
+        sum.sample_latency_us = Some(afs::hist::QuantilesUs::of(&ends.sample_latency));
+        sum.batch_latency_us = Some(afs::hist::QuantilesUs::of(&ends.batch_latency));
     }
     sum.bridged = !link.bridges().empty();
     Ok(sum)
+}
+
+type Pub<T> = iceoryx2::port::publisher::Publisher<ipc::Svc, T, ()>;
+type Sub<T> = iceoryx2::port::subscriber::Subscriber<ipc::Svc, T, ()>;
+
+/// The board's own ends of the servo stream: on the controller's side the servo's samples in
+/// and the batches out, on the remote side the batches in and the samples out.
+struct Ends {
+    servo_sub: Option<Sub<msg::ServoSample>>,
+    batch_pub: Option<Pub<msg::ServoBatch>>,
+    batch_sub: Option<Sub<msg::ServoBatch>>,
+    servo_pub: Option<Pub<msg::ServoSample>>,
+    packer: Packer,
+    sample_latency: afs::hist::Histogram<u64>,
+    batch_latency: afs::hist::Histogram<u64>,
+}
+
+impl Ends {
+    fn open(node: &Node<ipc::Svc>, side: Side) -> Result<Self> {
+        let controller = side == Side::Controller;
+        Ok(Self {
+            servo_sub: controller
+                .then(|| {
+                    ipc::servo(node)?
+                        .subscriber_builder()
+                        .buffer_size(ipc::TICK_BUFFER)
+                        .create()
+                        .context("servo subscriber")
+                })
+                .transpose()?,
+            batch_pub: controller
+                .then(|| {
+                    ipc::link_servo(node)?
+                        .publisher_builder()
+                        .backpressure_strategy(ipc::BACKPRESSURE)
+                        .create()
+                        .context("batch publisher")
+                })
+                .transpose()?,
+            batch_sub: (!controller)
+                .then(|| {
+                    ipc::link_servo(node)?
+                        .subscriber_builder()
+                        .create()
+                        .context("batch subscriber")
+                })
+                .transpose()?,
+            servo_pub: (!controller)
+                .then(|| {
+                    ipc::servo(node)?
+                        .publisher_builder()
+                        .backpressure_strategy(ipc::BACKPRESSURE)
+                        .create()
+                        .context("servo publisher")
+                })
+                .transpose()?,
+            packer: Packer::new(afs::rt::monotonic_ns()),
+            sample_latency: afs::hist::new()?,
+            batch_latency: afs::hist::new()?,
+        })
+    }
+
+    /// Controller's side: the servo's new samples into batches; a paused (or ended) stream
+    /// sends what is packed.
+    fn pack(&mut self, sum: &mut Summary) {
+        let (Some(sub), Some(publ)) = (&self.servo_sub, &self.batch_pub) else {
+            return;
+        };
+        let mut got = false;
+        while let Ok(Some(s)) = sub.receive() {
+            got = true;
+            sum.servo_read += 1;
+            self.packer
+                .push(s.payload(), |b| send_batch(publ, b, &mut sum.batches_sent));
+        }
+        if !got {
+            self.packer
+                .flush(|b| send_batch(publ, b, &mut sum.batches_sent));
+        }
+    }
+
+    /// Controller's side: sends what is packed; false on the remote side.
+    fn flush(&mut self, sum: &mut Summary) -> bool {
+        let Some(publ) = &self.batch_pub else {
+            return false;
+        };
+        self.packer
+            .flush(|b| send_batch(publ, b, &mut sum.batches_sent));
+        true
+    }
+
+    /// Remote side: every batch from the other host unpacked onto this host's stream, each
+    /// number checked.
+    fn unpack(&mut self, sum: &mut Summary) {
+        let (Some(sub), Some(publ)) = (&self.batch_sub, &self.servo_pub) else {
+            return;
+        };
+        while let Ok(Some(b)) = sub.receive() {
+            let now = afs::rt::monotonic_ns();
+            afs::hist::record(
+                &mut self.batch_latency,
+                now.saturating_sub(b.payload().publish_ns),
+            );
+            let latency = &mut self.sample_latency;
+            let published = &mut sum.servo_published;
+            sum.unpacked.push(b.payload(), |s| {
+                if publ.send_copy(*s).is_ok() {
+                    *published += 1;
+                    afs::hist::record(latency, now.saturating_sub(s.publish_ns));
+                }
+            });
+        }
+    }
+
+    /// The publishers send rarely or in bursts: drop their dead subscribers' connections.
+    fn update_connections(&self) {
+        if let Some(p) = &self.batch_pub {
+            let _ = p.update_connections();
+        }
+        if let Some(p) = &self.servo_pub {
+            let _ = p.update_connections();
+        }
+    }
 }
 
 /// Stamps a packed batch with its publication time and sends it, counting it in `sent`.

@@ -5,10 +5,8 @@
 //! ```
 
 use afs::supervisor;
-use afs::tools::experiment;
-use afs_shared::experiments::{NAMES, Options};
+use afs::tools::experiment::{self, ExperimentArgs};
 use afs_shared::faults::FaultKind;
-use afs_shared::setups::Rig;
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
@@ -73,7 +71,7 @@ struct RunArgs {
     /// Serve a live view to Foxglove or Lichtblick on HOST:PORT (default 127.0.0.1:8765;
     /// port 0 picks a free one). The address is printed on stderr; open it with
     /// examples/foxglove-layout.json.
-    #[arg(long, value_name = "HOST:PORT", num_args = 0..=1, default_missing_value = afs::tools::view::DEFAULT_ADDR)]
+    #[arg(long, value_name = "HOST:PORT", num_args = 0..=1, default_missing_value = afs::observe::view::DEFAULT_ADDR)]
     foxglove: Option<String>,
     /// Rate of each high-rate stream in the live view (world, controller, force, /live), Hz.
     #[arg(long, value_name = "HZ", default_value_t = 100.0)]
@@ -90,7 +88,7 @@ fn run_stack(a: RunArgs, chaos: Option<afs::stack::ChaosOptions>) -> Result<Exit
     let foxglove = a
         .foxglove
         .as_deref()
-        .map(|addr| afs::tools::view::ViewSettings::parse(addr, a.foxglove_hz))
+        .map(|addr| afs::observe::view::ViewSettings::parse(addr, a.foxglove_hz))
         .transpose()?;
     let stop = afs::boards::stop_flag()?;
     let opts = afs::stack::RunOptions {
@@ -124,41 +122,7 @@ enum Command {
     ///
     /// Writes NAME.svg into --out and, with --json, prints one JSON object on stdout.
     /// Exits with status 1 if one of the experiment's acceptance checks fails.
-    Experiment {
-        /// The experiment (docs/experiments.md), or all of them.
-        #[arg(value_parser = experiment_names())]
-        name: String,
-        /// Directory for the plot(s).
-        #[arg(long, default_value = "out")]
-        out: PathBuf,
-        /// Seed of the sensor noise and surface roughness.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// Print the report as one JSON object (an array for `all`).
-        #[arg(long)]
-        json: bool,
-        /// fig4.6: use the six trials printed in the thesis.
-        #[arg(long)]
-        thesis_table: bool,
-        /// Run at every seed of FIRST..LAST (inclusive) and report, per check, its pass rate
-        /// and the median, 90th percentile and worst of its figure; plots each check's figure
-        /// over the seeds (NAME_seeds.svg). Overrides --seed.
-        #[arg(long, value_name = "FIRST..LAST")]
-        seeds: Option<String>,
-        /// Threads for --seeds (default: one per CPU).
-        #[arg(long)]
-        jobs: Option<usize>,
-        /// TOML file overriding the default set-up (plant, surface, sensor, servo); the
-        /// experiment's own settings apply on top.
-        #[arg(long)]
-        config: Option<PathBuf>,
-        /// The rig: `afs` (decoupled operating point, inverse-dynamics and preload
-        /// feedforward) or `thesis` (PID joints only, at a coupled point; docs/model.md).
-        /// Applied on top of --config. The thesis rig is defined for the friction experiments
-        /// (with `all`, only those run).
-        #[arg(long, default_value = "afs", value_parser = ["afs", "thesis"])]
-        rig: String,
-    },
+    Experiment(ExperimentArgs),
     /// Print the byte layout of every message exchanged over iceoryx2 (docs/messages.md).
     Messages {
         /// Print each message's line of the wire-compatibility table instead
@@ -283,7 +247,7 @@ enum Command {
         #[arg(long, default_value = "afs")]
         prefix: String,
         /// Address to serve on (port 0 picks a free one).
-        #[arg(long, value_name = "HOST:PORT", default_value = afs::tools::view::DEFAULT_ADDR)]
+        #[arg(long, value_name = "HOST:PORT", default_value = afs::observe::view::DEFAULT_ADDR)]
         foxglove: String,
         /// Rate of each high-rate stream (Hz).
         #[arg(long, value_name = "HZ", default_value_t = 100.0)]
@@ -349,11 +313,6 @@ enum Command {
     },
 }
 
-/// The experiments' names and `all`, for `afs experiment --help` and the parser.
-fn experiment_names() -> clap::builder::PossibleValuesParser {
-    clap::builder::PossibleValuesParser::new(NAMES.iter().copied().chain(["all"]))
-}
-
 fn main() -> ExitCode {
     match run() {
         Ok(code) => code,
@@ -364,134 +323,36 @@ fn main() -> ExitCode {
     }
 }
 
+/// Prints `r` as one JSON object with `json`, else as text.
+fn print<R: serde::Serialize + std::fmt::Display>(r: &R, json: bool) -> Result<()> {
+    if json {
+        say!("{}", serde_json::to_string_pretty(r)?);
+    } else {
+        show!(r);
+    }
+    Ok(())
+}
+
 fn run() -> Result<ExitCode> {
     let cli = Cli::parse();
     match cli.command {
-        Command::Experiment {
-            name,
-            out,
-            seed,
-            json,
-            thesis_table,
-            config,
-            seeds,
-            jobs,
-            rig,
-        } => {
-            let mut base = match &config {
-                Some(path) => afs::boards::load_config(path)?,
-                None => Default::default(),
-            };
-            let rig = Rig::parse(&rig).unwrap_or_default();
-            rig.apply(&mut base)?;
-            let opts = Options {
-                seed,
-                thesis_table,
-                base,
-                rig,
-            };
-            let names: Vec<&str> = if name == "all" && rig != Rig::Afs {
-                // The thesis's rig is defined for the friction experiments only.
-                afs_shared::experiments::FRICTION_NAMES.to_vec()
-            } else if name == "all" {
-                NAMES.to_vec()
-            } else {
-                vec![name.as_str()]
-            };
-            if let Some(range) = seeds {
-                let range = experiment::parse_seeds(&range)?;
-                let jobs = jobs.unwrap_or_else(afs::rt::available_cpus);
-                if jobs == 0 {
-                    anyhow::bail!("--jobs must be at least 1");
-                }
-                let stop = afs::boards::stop_flag()?;
-                let mut reports = Vec::new();
-                for n in names {
-                    let r = experiment::sweep(n, &opts, range.clone(), jobs, &out, &stop)?;
-                    if !json {
-                        show!(r);
-                    }
-                    reports.push(r);
-                }
-                if json {
-                    let text = match reports.as_slice() {
-                        [one] => serde_json::to_string_pretty(one)?,
-                        all => serde_json::to_string_pretty(all)?,
-                    };
-                    say!("{text}");
-                }
-                return Ok(if reports.iter().all(|r| r.passed) {
-                    ExitCode::SUCCESS
-                } else {
-                    ExitCode::from(1)
-                });
-            }
-            let mut reports = Vec::new();
-            let mut all_passed = true;
-            for n in names {
-                let report = experiment::run(n, &opts, &out)?;
-                all_passed &= report.passed;
-                if !json {
-                    show!(report);
-                }
-                reports.push(report);
-            }
-            if json {
-                let text = match reports.as_slice() {
-                    [one] => serde_json::to_string_pretty(one)?,
-                    all => serde_json::to_string_pretty(all)?,
-                };
-                say!("{text}");
-            }
-            Ok(if all_passed {
-                ExitCode::SUCCESS
-            } else {
-                ExitCode::from(1)
-            })
-        }
+        Command::Experiment(a) => experiment::command(&a, &*afs::boards::stop_flag()?),
         Command::Run { run } => run_stack(run, None),
         Command::Chaos {
             run,
             kills,
             faults,
             in_turn,
-        } => {
-            // None given: every kind the scenario allows (the supervisor decides).
-            let kinds = faults
-                .iter()
-                .map(|f| FaultKind::from_name(f.trim()).map_err(anyhow::Error::msg))
-                .collect::<Result<Vec<_>>>()?;
-            let seed = run.seed.unwrap_or(1);
-            run_stack(
-                run,
-                Some(afs::stack::ChaosOptions {
-                    faults: kills,
-                    seed,
-                    kinds,
-                    in_turn,
-                }),
-            )
-        }
+        } => chaos(run, kills, &faults, in_turn),
         Command::View {
             prefix,
             foxglove,
             foxglove_hz,
             json,
         } => {
-            let settings = afs::tools::view::ViewSettings::parse(&foxglove, foxglove_hz)?;
+            let settings = afs::observe::view::ViewSettings::parse(&foxglove, foxglove_hz)?;
             let stop = afs::boards::stop_flag()?;
-            let summary = afs::tools::view::attach(&prefix, settings, &stop)?;
-            if json {
-                say!("{}", serde_json::to_string_pretty(&summary)?);
-            } else {
-                say!(
-                    "live view {}: {} messages published, {} dropped, at most {} clients",
-                    summary.url,
-                    summary.published.values().sum::<u64>(),
-                    summary.dropped,
-                    summary.max_clients
-                );
-            }
+            print(&afs::observe::view::attach(&prefix, settings, &stop)?, json)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Record {
@@ -501,29 +362,13 @@ fn run() -> Result<ExitCode> {
             json,
         } => {
             let stop = afs::boards::stop_flag()?;
-            let r = afs::tools::record::record_stack(&prefix, &out, duration, &stop)?;
-            if json {
-                say!("{}", serde_json::to_string_pretty(&r)?);
-            } else {
-                say!(
-                    "recorded {} ({} messages, {} servo samples, {} missing in {} gaps; ended: {})",
-                    r.recording.path.display(),
-                    r.recording.messages.values().sum::<u64>(),
-                    r.servo.received,
-                    r.servo.missing,
-                    r.servo.gaps,
-                    r.ended
-                );
-            }
+            let r = afs::observe::record::record_stack(&prefix, &out, duration, &stop)?;
+            print(&r, json)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Status { prefix, json } => {
             let status = supervisor::status(&prefix, std::time::Duration::from_secs(2))?;
-            if json {
-                say!("{}", serde_json::to_string_pretty(&status)?);
-            } else {
-                show!(status);
-            }
+            print(&status, json)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Sensor {
@@ -542,23 +387,18 @@ fn run() -> Result<ExitCode> {
                 record,
                 answer_within_s: 1.0,
             };
-            let report = afs::tools::sensor::run(&opts, &stop)?;
-            if json {
-                say!("{}", serde_json::to_string_pretty(&report)?);
-            } else {
-                show!(report);
-            }
+            print(&afs::tools::sensor::run(&opts, &stop)?, json)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Plot { file, out } => {
-            let fig = afs::tools::record::figure(&file)?;
+            let fig = afs::observe::record::figure(&file)?;
             let out = out.unwrap_or_else(|| file.with_extension("svg"));
             afs::tools::plot::render(&fig, &out)?;
             say!("wrote {}", out.display());
             Ok(ExitCode::SUCCESS)
         }
         Command::Export { file, out } => {
-            for f in afs::tools::record::export_csv(&file, &out)? {
+            for f in afs::observe::record::export_csv(&file, &out)? {
                 say!("wrote {}", f.display());
             }
             Ok(ExitCode::SUCCESS)
@@ -578,11 +418,7 @@ fn run() -> Result<ExitCode> {
                 prefix,
             };
             let report = afs::tools::bench::run(&opts, &stop)?;
-            if json {
-                say!("{}", serde_json::to_string_pretty(&report)?);
-            } else {
-                show!(report);
-            }
+            print(&report, json)?;
             Ok(if report.interrupted {
                 ExitCode::from(1)
             } else {
@@ -597,27 +433,7 @@ fn run() -> Result<ExitCode> {
             afs::tools::bench::peer(&prefix, &socket, cpu)?;
             Ok(ExitCode::SUCCESS)
         }
-        Command::Iox2Config { prefix, write } => {
-            let text = afs::ipc::config_toml(&prefix)?;
-            match write {
-                None => say!("{text}"),
-                Some(dir) => {
-                    let conf = dir.join("config");
-                    std::fs::create_dir_all(&conf)
-                        .with_context(|| format!("creating {}", conf.display()))?;
-                    let file = conf.join("iceoryx2.toml");
-                    std::fs::write(&file, text)
-                        .with_context(|| format!("writing {}", file.display()))?;
-                    say!(
-                        "wrote {}; run the iox2 CLI from {} (e.g. `cd {} && iox2 node list`)",
-                        file.display(),
-                        dir.display(),
-                        dir.display()
-                    );
-                }
-            }
-            Ok(ExitCode::SUCCESS)
-        }
+        Command::Iox2Config { prefix, write } => iox2_config(&prefix, write.as_deref()),
         Command::Messages { table } => {
             for l in afs_shared::msg::layouts() {
                 if !table {
@@ -629,4 +445,46 @@ fn run() -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
     }
+}
+
+/// `afs chaos`: the run with `kills` faults of the kinds named (none: every kind the stack
+/// and scenario allow, the supervisor decides).
+fn chaos(run: RunArgs, kills: usize, faults: &[String], in_turn: bool) -> Result<ExitCode> {
+    let kinds = faults
+        .iter()
+        .map(|f| FaultKind::from_name(f.trim()).map_err(anyhow::Error::msg))
+        .collect::<Result<Vec<_>>>()?;
+    let seed = run.seed.unwrap_or(1);
+    run_stack(
+        run,
+        Some(afs::stack::ChaosOptions {
+            faults: kills,
+            seed,
+            kinds,
+            in_turn,
+        }),
+    )
+}
+
+/// `afs iox2-config`: the stack's iceoryx2 config, printed or written as
+/// DIR/config/iceoryx2.toml.
+fn iox2_config(prefix: &str, write: Option<&std::path::Path>) -> Result<ExitCode> {
+    let text = afs::ipc::config_toml(prefix)?;
+    match write {
+        None => say!("{text}"),
+        Some(dir) => {
+            let conf = dir.join("config");
+            std::fs::create_dir_all(&conf)
+                .with_context(|| format!("creating {}", conf.display()))?;
+            let file = conf.join("iceoryx2.toml");
+            std::fs::write(&file, text).with_context(|| format!("writing {}", file.display()))?;
+            say!(
+                "wrote {}; run the iox2 CLI from {} (e.g. `cd {} && iox2 node list`)",
+                file.display(),
+                dir.display(),
+                dir.display()
+            );
+        }
+    }
+    Ok(ExitCode::SUCCESS)
 }

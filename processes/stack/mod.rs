@@ -262,7 +262,7 @@ pub struct RunOptions {
     /// Inject faults (`afs chaos`).
     pub chaos: Option<ChaosOptions>,
     /// Serve a live view to Foxglove.
-    pub foxglove: Option<crate::tools::view::ViewSettings>,
+    pub foxglove: Option<crate::observe::view::ViewSettings>,
 }
 
 /// What `afs chaos` injects.

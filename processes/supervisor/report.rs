@@ -6,8 +6,8 @@ use super::watch::RunEnd;
 pub use crate::boards::sensor::{RdtReport, SensorReport};
 use crate::chaos::ChaosReport;
 pub use crate::hist::QuantilesUs;
+use crate::observe::record::RecordSummary;
 use crate::stack::Timeline;
-use crate::tools::record::RecordSummary;
 use afs_shared::check::{self, Check};
 use afs_shared::faults::FaultFigures;
 use afs_shared::join::SampleCounts;
@@ -227,7 +227,7 @@ pub struct RunReport {
     pub record: Option<RecordSummary>,
     /// The live view, if one was asked for.
     #[serde(default)]
-    pub view: Option<crate::tools::view::ViewSummary>,
+    pub view: Option<crate::observe::view::ViewSummary>,
     /// What was left.
     pub cleanup: Cleanup,
     /// Safety figures (safe-state latency, normal force, non-finite forces).

@@ -3,14 +3,15 @@
 
 use crate::tools::plot;
 use afs_shared::check::Check;
-use afs_shared::error::ExperimentError;
-use afs_shared::experiments::{self, Options, Outcome};
+use afs_shared::experiments::{self, Options, Run};
 use afs_shared::setups::Rig;
 use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use std::fmt;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
 /// What running an experiment cost.
@@ -76,38 +77,33 @@ fn file_stem(name: &str, rig: Rig) -> String {
     }
 }
 
+/// The names of the experiments of the thesis's rig.
+fn friction_names() -> String {
+    let names: Vec<&str> = experiments::REGISTRY
+        .iter()
+        .filter(|e| e.friction)
+        .map(|e| e.name)
+        .collect();
+    names.join(", ")
+}
+
 /// Runs experiment `name` without plotting it.
-fn compute(name: &str, opts: &Options) -> Result<Packed> {
-    if opts.rig != Rig::Afs && !experiments::FRICTION_NAMES.contains(&name) {
+fn compute(name: &str, opts: &Options) -> Result<Run> {
+    let e = experiments::find(name).with_context(|| {
+        let names: Vec<&str> = experiments::REGISTRY.iter().map(|e| e.name).collect();
+        format!(
+            "unknown experiment '{name}'; choose one of: {}",
+            names.join(", ")
+        )
+    })?;
+    if opts.rig != Rig::Afs && !e.friction {
         bail!(
             "the {} rig is defined for the friction experiments ({}); run {name} without --rig",
             opts.rig.name(),
-            experiments::FRICTION_NAMES.join(", ")
+            friction_names()
         );
     }
-    Ok(match name {
-        "friction-id" => pack(experiments::friction_id(opts))?,
-        "fig4.1" => pack(experiments::fig4_1(opts))?,
-        "fig4.2" => pack(experiments::fig4_2(opts))?,
-        "fig4.3" => pack(experiments::fig4_3(opts))?,
-        "fig4.4" => pack(experiments::fig4_4(opts))?,
-        "fig4.5" => pack(experiments::fig4_5(opts))?,
-        "fig4.6" => pack(experiments::fig4_6(opts))?,
-        "fig4.7" => pack(experiments::fig4_7(opts))?,
-        "fig4.8" => pack(experiments::fig4_8(opts))?,
-        "fig4.9" => pack(experiments::fig4_9(opts))?,
-        "fig4.10" => pack(experiments::fig4_10(opts))?,
-        "tangent" => pack(experiments::tangent(opts))?,
-        "rls" => pack(experiments::rls(opts))?,
-        "fig5.6" => pack(experiments::fig5_6(opts))?,
-        "corners" => pack(experiments::corners(opts))?,
-        "fig5.3" => pack(experiments::fig5_3(opts))?,
-        "fig5.9" => pack(experiments::fig5_9(opts))?,
-        other => bail!(
-            "unknown experiment '{other}'; choose one of: {}",
-            experiments::NAMES.join(", ")
-        ),
-    })
+    Ok((e.run)(opts)?)
 }
 
 /// Runs experiment `name`, writes its plot into `out_dir`.
@@ -116,49 +112,31 @@ pub fn run(name: &str, opts: &Options, out_dir: &Path) -> Result<ExperimentRepor
         .with_context(|| format!("creating output directory {}", out_dir.display()))?;
     let started = Instant::now();
     let cpu0 = crate::procfs::cpu_seconds();
-    let packed = compute(name, opts)?;
+    let out = compute(name, opts)?;
     let wall = started.elapsed().as_secs_f64();
     let cpu = crate::procfs::cpu_seconds() - cpu0;
     let file = out_dir.join(format!("{}.svg", file_stem(name, opts.rig)));
-    plot::render(&packed.figure, &file)?;
-    let passed = afs_shared::check::all_pass(&packed.checks);
+    plot::render(&out.figure, &file)?;
+    let passed = afs_shared::check::all_pass(&out.checks);
     Ok(ExperimentReport {
         experiment: name.to_string(),
         seed: opts.seed,
         rig: opts.rig,
         passed,
-        summary: packed.summary,
-        checks: packed.checks,
-        simulated_s: packed.simulated_s,
+        summary: out.summary,
+        checks: out.checks,
+        simulated_s: out.simulated_s,
         plot: file.display().to_string(),
         timing: Timing {
-            simulated_s: packed.simulated_s,
+            simulated_s: out.simulated_s,
             wall_s: wall,
             cpu_s: cpu,
             realtime_factor: if cpu > 0.0 {
-                packed.simulated_s / cpu
+                out.simulated_s / cpu
             } else {
                 0.0
             },
         },
-    })
-}
-
-/// An outcome with its summary made generic.
-struct Packed {
-    summary: Value,
-    checks: Vec<Check>,
-    simulated_s: f64,
-    figure: experiments::Figure,
-}
-
-fn pack<S: Serialize>(r: Result<Outcome<S>, ExperimentError>) -> Result<Packed> {
-    let o = r?;
-    Ok(Packed {
-        summary: serde_json::to_value(&o.summary).context("serialising the summary")?,
-        checks: o.checks,
-        simulated_s: o.simulated_s,
-        figure: o.figure,
     })
 }
 
@@ -343,6 +321,137 @@ pub fn sweep(
         },
         cpu_s,
     })
+}
+
+/// The options of `afs experiment`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ExperimentArgs {
+    /// The experiment (`afs experiment list`, docs/experiments.md), `all` of them, or `list`
+    /// to print the table of experiments.
+    #[arg(value_parser = experiment_names())]
+    pub name: String,
+    /// Directory for the plot(s).
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Seed of the sensor noise and surface roughness.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Print the report as one JSON object (an array for `all`).
+    #[arg(long)]
+    pub json: bool,
+    /// fig4.6: use the six trials printed in the thesis.
+    #[arg(long)]
+    pub thesis_table: bool,
+    /// Run at every seed of FIRST..LAST (inclusive) and report, per check, its pass rate and
+    /// the median, 90th percentile and worst of its figure; plots each check's figure over the
+    /// seeds (NAME_seeds.svg). Overrides --seed.
+    #[arg(long, value_name = "FIRST..LAST")]
+    pub seeds: Option<String>,
+    /// Threads for --seeds (default: one per CPU).
+    #[arg(long)]
+    pub jobs: Option<usize>,
+    /// TOML file overriding the default set-up (plant, surface, sensor, servo); the
+    /// experiment's own settings apply on top.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// The rig: `afs` (decoupled operating point, inverse-dynamics and preload feedforward) or
+    /// `thesis` (PID joints only, at a coupled point; docs/model.md). Applied on top of
+    /// --config. The thesis rig is defined for the friction experiments (with `all`, only
+    /// those run).
+    #[arg(long, default_value = "afs", value_parser = ["afs", "thesis"])]
+    pub rig: String,
+}
+
+/// The registry's names, `all` and `list`, for `afs experiment --help` and the parser.
+fn experiment_names() -> clap::builder::PossibleValuesParser {
+    clap::builder::PossibleValuesParser::new(
+        experiments::REGISTRY
+            .iter()
+            .map(|e| e.name)
+            .chain(["all", "list"]),
+    )
+}
+
+/// `afs experiment`: the named experiment(s) at one seed, or over `--seeds`; prints the
+/// report(s) (JSON with `--json`). Exit status 1 when a check fails.
+pub fn command(a: &ExperimentArgs, stop: &AtomicBool) -> Result<ExitCode> {
+    if a.name == "list" {
+        print!("{}", experiments::registry_table());
+        return Ok(ExitCode::SUCCESS);
+    }
+    let mut base = match &a.config {
+        Some(path) => crate::boards::load_config(path)?,
+        None => Default::default(),
+    };
+    let rig = Rig::parse(&a.rig).unwrap_or_default();
+    rig.apply(&mut base)?;
+    let opts = Options {
+        seed: a.seed,
+        thesis_table: a.thesis_table,
+        base,
+        rig,
+    };
+    // The thesis's rig is defined for the friction experiments only.
+    let names: Vec<&str> = match a.name.as_str() {
+        "all" => experiments::REGISTRY
+            .iter()
+            .filter(|e| rig == Rig::Afs || e.friction)
+            .map(|e| e.name)
+            .collect(),
+        one => vec![one],
+    };
+    let passed = match &a.seeds {
+        Some(range) => {
+            let range = parse_seeds(range)?;
+            let jobs = a.jobs.unwrap_or_else(crate::rt::available_cpus);
+            if jobs == 0 {
+                bail!("--jobs must be at least 1");
+            }
+            let mut reports = Vec::new();
+            for n in names {
+                reports.push(sweep(n, &opts, range.clone(), jobs, &a.out, stop)?);
+                show(reports.last(), a.json);
+            }
+            print_json(&reports, a.json)?;
+            reports.iter().all(|r| r.passed)
+        }
+        None => {
+            let mut reports = Vec::new();
+            for n in names {
+                reports.push(run(n, &opts, &a.out)?);
+                show(reports.last(), a.json);
+            }
+            print_json(&reports, a.json)?;
+            reports.iter().all(|r| r.passed)
+        }
+    };
+    Ok(if passed {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
+}
+
+/// A report as text, as soon as it is done (not with `--json`). A closed stdout (`afs
+/// experiment all | head`) is not an error.
+fn show<R: fmt::Display>(report: Option<&R>, json: bool) {
+    use std::io::Write as _;
+    if let Some(r) = report.filter(|_| !json) {
+        let _ = write!(std::io::stdout().lock(), "{r}");
+    }
+}
+
+/// With `json`, the reports as one JSON value: an object for one, an array for more.
+fn print_json<R: Serialize>(reports: &[R], json: bool) -> Result<()> {
+    use std::io::Write as _;
+    if json {
+        let text = match reports {
+            [one] => serde_json::to_string_pretty(one)?,
+            all => serde_json::to_string_pretty(all)?,
+        };
+        let _ = writeln!(std::io::stdout().lock(), "{text}");
+    }
+    Ok(())
 }
 
 #[cfg(test)]

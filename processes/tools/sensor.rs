@@ -4,8 +4,8 @@
 
 use crate::boards::sensor::rdt::{Poll, RdtSettings, Receiver, copy_counters};
 use crate::boards::sensor::{RdtReport, SensorReport};
-use crate::tools::record::{RecordSummary, Recorder};
-use crate::tools::topics::Rec;
+use crate::observe::record::{RecordSummary, Recorder};
+use crate::observe::topics::Rec;
 use crate::{ipc, rt};
 use afs_shared::msg::SensorStats;
 use anyhow::{Context, Result, bail};

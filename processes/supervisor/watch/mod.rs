@@ -11,10 +11,10 @@ pub use streams::{Ports, Sinks};
 use super::child::{Ended, Launch, Proc};
 use crate::chaos::{Injector, LinkCut, ServoView};
 use crate::ipc;
+use crate::observe::record::RecordSummary;
+use crate::observe::view::{LiveView, ViewSummary};
 use crate::rt;
 use crate::stack::Footprint;
-use crate::tools::record::RecordSummary;
-use crate::tools::view::{LiveView, ViewSummary};
 use afs_shared::faults::FaultMonitor;
 use afs_shared::join::Joiner;
 use afs_shared::msg::{

@@ -1,8 +1,8 @@
 //! The supervisor's status stream (`afs/supervisor/status`, 2 Hz) and its progress line.
 
 use super::Supervisor;
+use crate::observe::topics::Rec;
 use crate::rt;
-use crate::tools::topics::Rec;
 use afs_shared::msg::{self, ProcessStatus, SupervisorStatus, fixed_str};
 use std::time::{Duration, Instant};
 

@@ -5,10 +5,10 @@
 use super::Supervisor;
 use crate::chaos::ServoView;
 use crate::ipc::{self, Svc};
+use crate::observe::record::Recorder;
+use crate::observe::topics::{self, Rec};
+use crate::observe::view::LiveView;
 use crate::rt;
-use crate::tools::record::Recorder;
-use crate::tools::topics::{self, Rec};
-use crate::tools::view::LiveView;
 use afs_shared::msg::{
     Board, BoardStartup, FrictionReport, LoopStats, PlantSample, ProcessState, SensorStats,
     ServoCommand, ServoSample, SupervisorStatus, WrenchFlags, WrenchSample,

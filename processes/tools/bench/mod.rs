@@ -29,6 +29,7 @@ mod hop;
 mod link;
 mod stack;
 mod transport;
+mod upstream;
 
 pub use transport::peer;
 

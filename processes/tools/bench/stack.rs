@@ -355,8 +355,8 @@ enum Kind {
 fn viewer(addr: &str, cpu: usize, running: &AtomicBool) -> u64 {
     // Where an operator's viewer runs: not on the servo's core.
     pin_thread(cpu);
-    use crate::tools::topics::TOPICS;
-    use crate::tools::view_client::ViewClient;
+    use crate::observe::topics::TOPICS;
+    use crate::observe::view_client::ViewClient;
     let all: Vec<&str> = TOPICS.iter().map(|t| t.0).collect();
     let url = format!("ws://{addr}");
     let Ok(mut c) = ViewClient::connect(&url, Duration::from_secs(30)) else {
@@ -389,65 +389,7 @@ pub(super) fn stack(opts: &BenchOptions, stop: &AtomicBool) -> Result<StackPart>
     let other = if cpu == 0 { 1 } else { 0 };
     let can_hog = rt::available_cpus() > 1;
     let kinds = [Kind::Plain, Kind::Hog, Kind::Viewer];
-    // Alternating (A B C A B C) so that a noisy stretch of the machine falls on every kind.
-    let mut sums: Vec<StackSums> = kinds
-        .iter()
-        .map(|_| {
-            Ok(StackSums {
-                wake: hist::new()?,
-                age: hist::new()?,
-                runs: 0,
-                misses: 0,
-                ticks: 0,
-                safe_entries: 0,
-                stale_ticks: 0,
-                passed: true,
-            })
-        })
-        .collect::<Result<_>>()?;
-    let mut viewer_messages = 0;
-    for i in 0..2 * kinds.len() {
-        if stop.load(Ordering::Relaxed) {
-            break;
-        }
-        let kind = kinds[i % kinds.len()];
-        let prefix = format!("{}s{i}", opts.prefix);
-        let dir = scratch(&prefix)?;
-        let addr = format!("127.0.0.1:{}", free_port()?);
-        let extra: Vec<String> = if kind == Kind::Viewer {
-            vec!["--foxglove".into(), addr.clone()]
-        } else {
-            Vec::new()
-        };
-        let (r, seen) = run_stack(
-            DEFAULT_STACK,
-            &prefix,
-            opts.duration_s / 2.0,
-            &dir,
-            &extra,
-            stop,
-            |running| match kind {
-                Kind::Hog if can_hog => {
-                    hog(other, running);
-                    0
-                }
-                Kind::Viewer => viewer(&addr, other, running),
-                _ => 0,
-            },
-        )?;
-        viewer_messages += seen;
-        let _ = std::fs::remove_dir_all(&dir);
-        let k = &mut sums[i % kinds.len()];
-        k.wake.add(&r.wake).context("adding histograms")?;
-        k.age.add(&r.age).context("adding histograms")?;
-        let l = r.report.loop_stats.unwrap_or_default();
-        k.runs += 1;
-        k.misses += l.misses;
-        k.ticks += l.ticks;
-        k.safe_entries += l.safe_entries;
-        k.stale_ticks += l.stale_ticks;
-        k.passed &= r.report.passed;
-    }
+    let (sums, viewer_messages) = alternate(opts, stop, &kinds, other, can_hog)?;
     let sensor_period_us = 1e6 / afs_shared::sim::SimConfig::default().sensor.rate_hz;
     let mut series = Vec::new();
     let mut runs = Vec::new();
@@ -551,4 +493,75 @@ pub(super) fn stack(opts: &BenchOptions, stop: &AtomicBool) -> Result<StackPart>
         },
         part,
     })
+}
+
+/// Two stack runs of each kind, alternating (A B C A B C) so that a noisy stretch of the
+/// machine falls on every kind; their histograms and counts summed by kind, and the messages
+/// the Foxglove client saw.
+fn alternate(
+    opts: &BenchOptions,
+    stop: &AtomicBool,
+    kinds: &[Kind; 3],
+    other: usize,
+    can_hog: bool,
+) -> Result<(Vec<StackSums>, u64)> {
+    let mut sums: Vec<StackSums> = kinds
+        .iter()
+        .map(|_| {
+            Ok(StackSums {
+                wake: hist::new()?,
+                age: hist::new()?,
+                runs: 0,
+                misses: 0,
+                ticks: 0,
+                safe_entries: 0,
+                stale_ticks: 0,
+                passed: true,
+            })
+        })
+        .collect::<Result<_>>()?;
+    let mut viewer_messages = 0;
+    for i in 0..2 * kinds.len() {
+        if stop.load(Ordering::Relaxed) {
+            break;
+        }
+        let kind = kinds[i % kinds.len()];
+        let prefix = format!("{}s{i}", opts.prefix);
+        let dir = scratch(&prefix)?;
+        let addr = format!("127.0.0.1:{}", free_port()?);
+        let extra: Vec<String> = if kind == Kind::Viewer {
+            vec!["--foxglove".into(), addr.clone()]
+        } else {
+            Vec::new()
+        };
+        let (r, seen) = run_stack(
+            DEFAULT_STACK,
+            &prefix,
+            opts.duration_s / 2.0,
+            &dir,
+            &extra,
+            stop,
+            |running| match kind {
+                Kind::Hog if can_hog => {
+                    hog(other, running);
+                    0
+                }
+                Kind::Viewer => viewer(&addr, other, running),
+                _ => 0,
+            },
+        )?;
+        viewer_messages += seen;
+        let _ = std::fs::remove_dir_all(&dir);
+        let k = &mut sums[i % kinds.len()];
+        k.wake.add(&r.wake).context("adding histograms")?;
+        k.age.add(&r.age).context("adding histograms")?;
+        let l = r.report.loop_stats.unwrap_or_default();
+        k.runs += 1;
+        k.misses += l.misses;
+        k.ticks += l.ticks;
+        k.safe_entries += l.safe_entries;
+        k.stale_ticks += l.stale_ticks;
+        k.passed &= r.report.passed;
+    }
+    Ok((sums, viewer_messages))
 }

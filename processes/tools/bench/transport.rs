@@ -39,6 +39,10 @@ pub(super) const TRANSPORTS: [Transport; 5] = [
 /// Control command that ends the peer.
 pub(super) const QUIT: u32 = u32::MAX;
 
+/// Control command: be participant B of upstream's method for `count` exchanges (plus the code
+/// of its `Extra`, 0 to 15).
+pub(super) const UPSTREAM: u32 = 100;
+
 /// Size of the ping (the wrench sample's) and of the pong (the servo sample's).
 pub(super) const PING: usize = std::mem::size_of::<WrenchSample>();
 pub(super) const PONG: usize = std::mem::size_of::<ServoSample>();
@@ -385,6 +389,7 @@ pub fn peer(prefix: &str, socket: &Path, cpu: Option<usize>) -> Result<()> {
     let page = AtomicPage::open(prefix, false)?;
     let mut sock = UnixStream::connect(socket)
         .with_context(|| format!("connecting to {}", socket.display()))?;
+    let upstream = super::upstream::Services::open(&node)?;
     let mut gate = SampleGate::new(GateParams {
         future_tolerance_ns: u64::MAX / 4,
         ..GateParams::default()
@@ -394,6 +399,15 @@ pub fn peer(prefix: &str, socket: &Path, cpu: Option<usize>) -> Result<()> {
         sock.read_exact(&mut cmd).context("reading a command")?;
         let t = u32::from_ne_bytes(cmd[..4].try_into().expect("4 bytes"));
         let n = u32::from_ne_bytes(cmd[4..].try_into().expect("4 bytes"));
+        if (UPSTREAM..UPSTREAM + 16).contains(&t) {
+            // Its ports exist only for the batch: the in-process B's batches see one
+            // subscriber, as upstream's do.
+            let b = super::upstream::Participant::open(&upstream, false)?
+                .with(super::upstream::Extra::of_code(t - UPSTREAM));
+            sock.write_all(&[0; 4])?;
+            b.run_b(n)?;
+            continue;
+        }
         sock.write_all(&[0; 4])?;
         if t == QUIT {
             return Ok(());

@@ -4,39 +4,28 @@
 //! [`Figure`] (plot data; rendering is the CLI's job), and [`Check`]s stating the acceptance
 //! criteria with measured value and limit. Everything is a pure function of the options.
 //!
-//! | name          | thesis            | what                                                          |
-//! |---------------|-------------------|---------------------------------------------------------------|
-//! | `friction-id` | eq. 4.23          | constant-velocity strokes, eq. 4.5 identified                  |
-//! | `fig4.1`      | fig. 4.1          | eq. 4.5's components: static, kinetic, Stribeck, viscous       |
-//! | `fig4.2`      | fig. 4.2          | eq. 4.5 against velocity and its minimum                       |
-//! | `fig4.3`      | fig. 4.3, eq. 4.9 | friction under a pure dither, zero mean                        |
-//! | `fig4.4`      | fig. 4.4, eq. 4.11| mean friction against nominal velocity under a dither          |
-//! | `fig4.5`      | fig. 4.5          | the same traverse without and with a fixed dither              |
-//! | `fig4.6`      | fig. 4.6          | μ from normal/tangential force trials                          |
-//! | `fig4.7`      | fig. 4.7          | dither amplitude raised step-wise, oscillation per step        |
-//! | `fig4.8`      | fig. 4.8          | on-line tuning from Aω = 0.2 ẋ_o, thesis tuner vs cost tuner   |
-//! | `fig4.9`      | fig. 4.9          | slow tuning: the mean friction as Aω passes ẋ_o                |
-//! | `fig4.10`     | fig. 4.10         | slow tuning: amplitude, oscillation and normal force           |
-//! | `tangent`     | §5.3, eqs. 5.6–5.10, 6.1 | tangent estimate against α0, noise, friction, dither    |
-//! | `rls`         | eq. 5.10          | a turning surface followed on the batch vs the recursive estimate |
-//! | `fig5.3`      | fig. 5.3          | the preliminary correlation method vs the dither method        |
-//! | `fig5.6`      | fig. 5.6          | tracking an unknown sinusoidal surface                         |
-//! | `corners`     | §5.2, §7.2        | tracking a piecewise-linear surface through its corners        |
-//! | `fig5.9`      | figs. 5.9, 5.10   | a box rotated into a corner about its estimated rotation centre |
+//! Every experiment is one entry of [`REGISTRY`] (name, thesis section, what it does,
+//! whether the thesis's rig is defined for it, the function): the CLI's names, `--rig
+//! thesis` and the docs' table (`afs experiment list`, docs/experiments.md) all read it.
 
 mod curves;
-mod friction;
+mod identification;
 mod multicontact;
 mod recursive;
+mod suppression;
 mod tracking;
+mod tuning;
 
 pub use curves::*;
-pub use friction::*;
+pub use identification::*;
 pub use multicontact::*;
 pub use recursive::*;
+pub use suppression::*;
 pub use tracking::*;
+pub use tuning::*;
 
 pub use crate::check::Check;
+use crate::error::ExperimentError;
 use crate::sim::SimConfig;
 use crate::tuner::TunerConfig;
 use serde::Serialize;
@@ -65,41 +54,98 @@ impl Default for Options {
     }
 }
 
-/// The experiment names, in the order the README lists them.
-pub const NAMES: [&str; 17] = [
-    "friction-id",
-    "fig4.1",
-    "fig4.2",
-    "fig4.3",
-    "fig4.4",
-    "fig4.5",
-    "fig4.6",
-    "fig4.7",
-    "fig4.8",
-    "fig4.9",
-    "fig4.10",
-    "tangent",
-    "rls",
-    "fig5.3",
-    "fig5.6",
-    "corners",
-    "fig5.9",
-];
+/// One experiment of the [`REGISTRY`].
+#[derive(Debug, Clone, Copy)]
+pub struct Experiment {
+    /// Its name on the command line (`fig4.8`).
+    pub name: &'static str,
+    /// Where the thesis has it (`fig. 4.8`, `eq. 4.23`, `§5.3`).
+    pub thesis: &'static str,
+    /// What it does, in a line.
+    pub what: &'static str,
+    /// A friction experiment (ch. 4), for which the thesis's rig is defined (`--rig thesis`).
+    pub friction: bool,
+    /// Runs it.
+    pub run: fn(&Options) -> Result<Run, ExperimentError>,
+}
 
-/// The experiments of the thesis's chapter 4 (friction), which `--rig thesis` applies to.
-pub const FRICTION_NAMES: [&str; 11] = [
-    "friction-id",
-    "fig4.1",
-    "fig4.2",
-    "fig4.3",
-    "fig4.4",
-    "fig4.5",
-    "fig4.6",
-    "fig4.7",
-    "fig4.8",
-    "fig4.9",
-    "fig4.10",
-];
+/// An experiment's [`Outcome`] with its summary as JSON: what the registry's entries return.
+#[derive(Debug, Clone)]
+pub struct Run {
+    /// The measured figures (the experiment's own shape).
+    pub summary: serde_json::Value,
+    /// Acceptance criteria.
+    pub checks: Vec<Check>,
+    /// Simulated time (s).
+    pub simulated_s: f64,
+    /// Plot data.
+    pub figure: Figure,
+}
+
+impl<S: Serialize> From<Outcome<S>> for Run {
+    fn from(o: Outcome<S>) -> Self {
+        Self {
+            // A summary is plain data: numbers, strings, vectors of them.
+            summary: serde_json::to_value(&o.summary).unwrap_or_default(),
+            checks: o.checks,
+            simulated_s: o.simulated_s,
+            figure: o.figure,
+        }
+    }
+}
+
+macro_rules! registry {
+    ($($name:literal, $thesis:literal, $friction:literal, $f:path, $what:literal;)*) => {
+        /// Every experiment, in the order `afs experiment all` runs them.
+        pub const REGISTRY: &[Experiment] = &[$(Experiment {
+            name: $name,
+            thesis: $thesis,
+            what: $what,
+            friction: $friction,
+            run: |o| $f(o).map(Run::from),
+        }),*];
+    };
+}
+
+registry! {
+    "friction-id", "eq. 4.23", true, friction_id, "constant-velocity strokes, eq. 4.5 identified";
+    "fig4.1", "fig. 4.1", true, fig4_1, "eq. 4.5's components: static, kinetic, Stribeck, viscous";
+    "fig4.2", "fig. 4.2", true, fig4_2, "eq. 4.5 against velocity and its minimum";
+    "fig4.3", "fig. 4.3, eq. 4.9", true, fig4_3, "friction under a pure dither, zero mean";
+    "fig4.4", "fig. 4.4, eq. 4.11", true, fig4_4, "mean friction against nominal velocity under a dither";
+    "fig4.5", "fig. 4.5", true, fig4_5, "the same traverse without and with a fixed dither";
+    "fig4.6", "fig. 4.6", true, fig4_6, "μ from normal/tangential force trials";
+    "fig4.7", "fig. 4.7", true, fig4_7, "dither amplitude raised step-wise, oscillation per step";
+    "fig4.8", "fig. 4.8", true, fig4_8, "on-line tuning from Aω = 0.2 ẋ_o, thesis tuner vs cost tuner";
+    "fig4.9", "fig. 4.9", true, fig4_9, "slow tuning: the mean friction as Aω passes ẋ_o";
+    "fig4.10", "fig. 4.10", true, fig4_10, "slow tuning: amplitude, oscillation and normal force";
+    "tangent", "§5.3, eqs. 5.6–5.10, 6.1", false, tangent, "tangent estimate against α0, noise, friction, dither";
+    "rls", "eq. 5.10", false, rls, "a turning surface followed on the batch vs the recursive estimate";
+    "fig5.3", "fig. 5.3", false, fig5_3, "the preliminary correlation method vs the dither method";
+    "fig5.6", "fig. 5.6", false, fig5_6, "tracking an unknown sinusoidal surface";
+    "corners", "§5.2, §7.2", false, corners, "tracking a piecewise-linear surface through its corners";
+    "fig5.9", "figs. 5.9, 5.10", false, fig5_9, "a box rotated into a corner about its estimated rotation centre";
+}
+
+/// The experiment named `name`.
+pub fn find(name: &str) -> Option<&'static Experiment> {
+    REGISTRY.iter().find(|e| e.name == name)
+}
+
+/// The registry as the Markdown table docs/experiments.md shows (`afs experiment list`).
+pub fn registry_table() -> String {
+    let mut s = String::from("| name | thesis | what | `--rig thesis` |\n|---|---|---|---|\n");
+    for e in REGISTRY {
+        s += &format!(
+            "| `{}` | {} | {} | {} |\n",
+            e.name,
+            e.thesis,
+            e.what,
+            if e.friction { "yes" } else { "" }
+        );
+    }
+    s
+}
 
 /// One data series of a plot.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -179,4 +225,26 @@ pub(crate) fn config(opts: &Options, tuner: TunerConfig) -> SimConfig {
     cfg.seed = opts.seed;
     cfg.servo.tuner = tuner;
     cfg
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// docs/experiments.md shows the registry's table as `afs experiment list` prints it, and
+    /// every name is there once.
+    #[test]
+    fn the_docs_table_is_the_registry() {
+        let doc = include_str!("../../../docs/experiments.md");
+        assert!(
+            doc.contains(&registry_table()),
+            "docs/experiments.md is out of date; run `afs experiment list`:\n{}",
+            registry_table()
+        );
+        for (i, e) in REGISTRY.iter().enumerate() {
+            assert!(REGISTRY[..i].iter().all(|f| f.name != e.name), "{}", e.name);
+            assert!(find(e.name).is_some_and(|f| f.thesis == e.thesis));
+        }
+        assert!(find("fig4.99").is_none());
+    }
 }

@@ -152,10 +152,8 @@ pub fn fig5_9(opts: &Options) -> Result<Outcome<Fig59Summary>, ExperimentError> 
         trace: Vec::new(),
     };
     let tare = crate::sim::tare(&mut rig.sensor);
-    let (amp, freq, periods, ramp) = (0.5f64.to_radians(), 2.0, 4usize, 0.25);
-    // Friction suppression during the estimation dithers: a 20 Hz rotational dither about P̂
-    // keeps the contacts sliding (thesis §6.3: the two dithers superposed).
-    let (supp_amp, supp_hz) = (0.5f64.to_radians(), 20.0);
+    let dither = Dithers::default();
+    let (amp, freq, supp_amp, supp_hz) = (dither.amp, dither.freq, dither.supp_amp, dither.supp_hz);
     let force_target = Vec2::new(2.0, 2.0);
     let m = 0.01;
     // Initial guess: the box centre (the thesis starts from the box's size and the forces).
@@ -173,43 +171,20 @@ pub fn fig5_9(opts: &Options) -> Result<Outcome<Fig59Summary>, ExperimentError> 
             p_hat + Vec2::new(diag, -diag),
         ];
         let mut records: Vec<Vec<WrenchSample>> = Vec::new();
-        let (mut f_sum, mut m_sum, mut n_mean) = (Vec2::zeros(), 0.0f64, 0.0f64);
-        let mut friction_sum = Vec2::zeros();
+        let mut mean = MeanWrench::default();
         let truth_before = rig.plant.truth().rotation_centre;
         for (k, c) in centres.iter().enumerate() {
-            let omega = std::f64::consts::TAU * freq;
-            let total = 2.0 * ramp + periods as f64 / freq;
-            let n = (total / rig.dt).round() as usize;
-            let mut wrenches: Vec<WrenchSample> = Vec::new();
-            for i in 0..n {
-                let tau = i as f64 * rig.dt;
-                let e = if tau < ramp {
-                    0.5 * (1.0 - (std::f64::consts::PI * tau / ramp).cos())
-                } else if tau > total - ramp {
-                    0.5 * (1.0 - (std::f64::consts::PI * (total - tau) / ramp).cos())
-                } else {
-                    1.0
-                };
-                let phase = omega * (tau - ramp);
-                let angle = amp * e * phase.sin();
-                let supp = supp_amp * (std::f64::consts::TAU * supp_hz * rig.t).sin();
-                let target = rotate_about(rotate_about(base, *c, angle), p_hat, supp);
-                let ang_vel = amp * e * omega * phase.cos();
-                let d = Vec2::new(target[0], target[1]) - c;
-                rig.step(target, [-ang_vel * d.y, ang_vel * d.x, ang_vel]);
-                if tau >= ramp && tau < ramp + periods as f64 / freq && i % 10 == 0 {
-                    let f = rig.reading.force - tare.force;
-                    let o = Vec2::new(target[0], target[1]);
-                    wrenches.push((rig.t, phase, f, rig.reading.torque - tare.torque, o));
-                    if k == 0 {
-                        friction_sum += rig.plant.truth().friction_resultant;
-                        f_sum += f;
-                        m_sum += rig.reading.torque - tare.torque;
-                        n_mean += 1.0;
-                    }
-                }
-            }
-            records.push(wrenches);
+            let first = (k == 0).then_some(&mut mean);
+            records.push(dither_about(
+                &mut rig,
+                &dither,
+                base,
+                *c,
+                p_hat,
+                tare.force,
+                tare.torque,
+                first,
+            ));
         }
         // In-phase response per radian of each dither (the suppression dither removed by a
         // one-period comb), then P from the signed responses and the thesis's unsigned form.
@@ -226,9 +201,10 @@ pub fn fig5_9(opts: &Options) -> Result<Outcome<Fig59Summary>, ExperimentError> 
         };
         let (est, a_fit, thesis) = (fit.centre, fit.response_matrix, fit.thesis_centre);
         // Friction filter on the mean wrench of the first dither: moments about R = the corner.
-        let f_mean = f_sum / n_mean.max(1.0);
+        let n_mean = mean.n.max(1.0);
+        let f_mean = mean.force / n_mean;
         let o = Vec2::new(base[0], base[1]);
-        let m_r = m_sum / n_mean.max(1.0) + cross(o, f_mean);
+        let m_r = mean.torque / n_mean + cross(o, f_mean);
         let split = friction_filter(f_mean, m_r, est);
         let truth = truth_before.unwrap_or(Vec2::new(f64::NAN, f64::NAN));
         estimates.push(CentreEstimate {
@@ -241,7 +217,7 @@ pub fn fig5_9(opts: &Options) -> Result<Outcome<Fig59Summary>, ExperimentError> 
             thesis_error_fraction: thesis.map(|p| (p - truth).norm() / size),
             friction_estimated_n: split.map(|(_, t)| [t.x, t.y]),
             friction_true_n: {
-                let ft = friction_sum / n_mean.max(1.0);
+                let ft = mean.friction / n_mean;
                 [ft.x, ft.y]
             },
             response_matrix: [
@@ -251,16 +227,7 @@ pub fn fig5_9(opts: &Options) -> Result<Outcome<Fig59Summary>, ExperimentError> 
             coupling: (a_fit[(0, 0)].hypot(a_fit[(1, 1)])) / (a_fit[(0, 1)].hypot(a_fit[(1, 0)])),
         });
         p_hat = est;
-        // Rotate towards the corner about the estimate, smoothly over 0.5 s.
-        let step = -(2f64.to_radians()).min(base[2]);
-        let n = (0.5 / rig.dt) as usize;
-        for i in 0..n {
-            let s = (i + 1) as f64 / n as f64;
-            let e = 0.5 * (1.0 - (std::f64::consts::PI * s).cos());
-            let target = rotate_about(base, p_hat, step * e);
-            rig.step(target, [0.0; 3]);
-        }
-        rig.target = rotate_about(base, p_hat, step);
+        rotate_towards_corner(&mut rig, base, p_hat);
         settle(&mut rig, p_hat, tare.force, force_target, supp_amp, supp_hz);
     }
     let max_err = estimates
@@ -281,7 +248,128 @@ pub fn fig5_9(opts: &Options) -> Result<Outcome<Fig59Summary>, ExperimentError> 
         ),
         Check::at_most("final_tilt_deg", "final tilt (deg)", final_tilt.abs(), 1.0),
     ];
-    let figure = Figure {
+    let figure = fig5_9_figure(&rig.trace, &estimates);
+    Ok(Outcome {
+        simulated_s: rig.t,
+        summary: Fig59Summary {
+            size_m: params.size_m,
+            initial_tilt_deg: tilt0.to_degrees(),
+            final_tilt_deg: final_tilt,
+            dither_deg: amp.to_degrees(),
+            dither_hz: freq,
+            noise_n: sensor_params.noise_force_n,
+            max_error_fraction: max_err,
+            thesis_max_error_fraction: thesis_max,
+            estimates,
+        },
+        checks,
+        figure,
+    })
+}
+
+/// The rotational dithers of `fig5.9`: the estimation dithers about each centre, and the
+/// friction-suppression dither about P̂ superposed on them (thesis §6.3: a 20 Hz rotational
+/// dither keeps the contacts sliding).
+struct Dithers {
+    /// Estimation dither amplitude (rad), frequency (Hz), periods, ramp in and out (s).
+    amp: f64,
+    freq: f64,
+    periods: usize,
+    ramp: f64,
+    /// Suppression dither amplitude (rad) and frequency (Hz).
+    supp_amp: f64,
+    supp_hz: f64,
+}
+
+impl Default for Dithers {
+    fn default() -> Self {
+        Self {
+            amp: 0.5f64.to_radians(),
+            freq: 2.0,
+            periods: 4,
+            ramp: 0.25,
+            supp_amp: 0.5f64.to_radians(),
+            supp_hz: 20.0,
+        }
+    }
+}
+
+/// Sums over a dither's recorded samples: force and moment measured, friction true, count.
+#[derive(Default)]
+struct MeanWrench {
+    force: Vec2,
+    torque: f64,
+    friction: Vec2,
+    n: f64,
+}
+
+/// One rotational dither about `c` (with the suppression dither about `p_hat` superposed),
+/// from the pose `base`; its record (every 10th tick of the full periods); the mean wrench
+/// summed into `mean` if given.
+#[allow(clippy::too_many_arguments)]
+fn dither_about(
+    rig: &mut Rig,
+    d: &Dithers,
+    base: Pose,
+    c: Vec2,
+    p_hat: Vec2,
+    tare_force: Vec2,
+    tare_torque: f64,
+    mut mean: Option<&mut MeanWrench>,
+) -> Vec<WrenchSample> {
+    let omega = std::f64::consts::TAU * d.freq;
+    let total = 2.0 * d.ramp + d.periods as f64 / d.freq;
+    let n = (total / rig.dt).round() as usize;
+    let mut wrenches: Vec<WrenchSample> = Vec::new();
+    for i in 0..n {
+        let tau = i as f64 * rig.dt;
+        let e = if tau < d.ramp {
+            0.5 * (1.0 - (std::f64::consts::PI * tau / d.ramp).cos())
+        } else if tau > total - d.ramp {
+            0.5 * (1.0 - (std::f64::consts::PI * (total - tau) / d.ramp).cos())
+        } else {
+            1.0
+        };
+        let phase = omega * (tau - d.ramp);
+        let angle = d.amp * e * phase.sin();
+        let supp = d.supp_amp * (std::f64::consts::TAU * d.supp_hz * rig.t).sin();
+        let target = rotate_about(rotate_about(base, c, angle), p_hat, supp);
+        let ang_vel = d.amp * e * omega * phase.cos();
+        let r = Vec2::new(target[0], target[1]) - c;
+        rig.step(target, [-ang_vel * r.y, ang_vel * r.x, ang_vel]);
+        if tau >= d.ramp && tau < d.ramp + d.periods as f64 / d.freq && i % 10 == 0 {
+            let f = rig.reading.force - tare_force;
+            let o = Vec2::new(target[0], target[1]);
+            wrenches.push((rig.t, phase, f, rig.reading.torque - tare_torque, o));
+            if let Some(m) = mean.as_deref_mut() {
+                m.friction += rig.plant.truth().friction_resultant;
+                m.force += f;
+                m.torque += rig.reading.torque - tare_torque;
+                m.n += 1.0;
+            }
+        }
+    }
+    wrenches
+}
+
+/// Rotates the box towards the corner by 2° (or what is left) about `p_hat`, smoothly over
+/// 0.5 s, and makes that pose the target.
+fn rotate_towards_corner(rig: &mut Rig, base: Pose, p_hat: Vec2) {
+    let step = -(2f64.to_radians()).min(base[2]);
+    let n = (0.5 / rig.dt) as usize;
+    for i in 0..n {
+        let s = (i + 1) as f64 / n as f64;
+        let e = 0.5 * (1.0 - (std::f64::consts::PI * s).cos());
+        let target = rotate_about(base, p_hat, step * e);
+        rig.step(target, [0.0; 3]);
+    }
+    rig.target = rotate_about(base, p_hat, step);
+}
+
+/// `fig5.9`'s plot: the rotation centre's coordinates (true, estimated, the thesis's form),
+/// the error, the tilt.
+fn fig5_9_figure(trace: &[[f64; 5]], estimates: &[CentreEstimate]) -> Figure {
+    Figure {
         title: "fig5.9/5.10: rotating a box into a corner about its estimated rotation centre"
             .into(),
         x_label: "time (s)".into(),
@@ -291,10 +379,7 @@ pub fn fig5_9(opts: &Options) -> Result<Outcome<Fig59Summary>, ExperimentError> 
                 x_label: None,
                 y_label: "rotation centre x (mm)".into(),
                 series: vec![
-                    series(
-                        "true",
-                        rig.trace.iter().map(|r| [r[0], r[1] * 1e3]).collect(),
-                    ),
+                    series("true", trace.iter().map(|r| [r[0], r[1] * 1e3]).collect()),
                     markers(
                         "estimated (3 signed dithers)",
                         estimates
@@ -315,10 +400,7 @@ pub fn fig5_9(opts: &Options) -> Result<Outcome<Fig59Summary>, ExperimentError> 
                 x_label: None,
                 y_label: "rotation centre y (mm)".into(),
                 series: vec![
-                    series(
-                        "true",
-                        rig.trace.iter().map(|r| [r[0], r[2] * 1e3]).collect(),
-                    ),
+                    series("true", trace.iter().map(|r| [r[0], r[2] * 1e3]).collect()),
                     markers(
                         "estimated (3 signed dithers)",
                         estimates
@@ -351,28 +433,9 @@ pub fn fig5_9(opts: &Options) -> Result<Outcome<Fig59Summary>, ExperimentError> 
                 y_label: "box tilt (deg)".into(),
                 series: vec![series(
                     "tilt",
-                    rig.trace
-                        .iter()
-                        .map(|r| [r[0], r[3].to_degrees()])
-                        .collect(),
+                    trace.iter().map(|r| [r[0], r[3].to_degrees()]).collect(),
                 )],
             },
         ],
-    };
-    Ok(Outcome {
-        simulated_s: rig.t,
-        summary: Fig59Summary {
-            size_m: params.size_m,
-            initial_tilt_deg: tilt0.to_degrees(),
-            final_tilt_deg: final_tilt,
-            dither_deg: amp.to_degrees(),
-            dither_hz: freq,
-            noise_n: sensor_params.noise_force_n,
-            max_error_fraction: max_err,
-            thesis_max_error_fraction: thesis_max,
-            estimates,
-        },
-        checks,
-        figure,
-    })
+    }
 }

@@ -336,6 +336,21 @@ pub struct StackRecording {
     pub seconds: f64,
 }
 
+impl std::fmt::Display for StackRecording {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(
+            f,
+            "recorded {} ({} messages, {} servo samples, {} missing in {} gaps; ended: {})",
+            self.recording.path.display(),
+            self.recording.messages.values().sum::<u64>(),
+            self.servo.received,
+            self.servo.missing,
+            self.servo.gaps,
+            self.ended
+        )
+    }
+}
+
 /// Records a running stack (every stream, as `afs run --record` does) to `path` until it
 /// stops, `duration_s` passes (0: no limit) or `stop` is set.
 pub fn record_stack(

@@ -86,6 +86,19 @@ pub struct ViewSummary {
     pub max_clients: u64,
 }
 
+impl std::fmt::Display for ViewSummary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(
+            f,
+            "live view {}: {} messages published, {} dropped, at most {} clients",
+            self.url,
+            self.published.values().sum::<u64>(),
+            self.dropped,
+            self.max_clients
+        )
+    }
+}
+
 /// Keeps every `stride`-th tick, and force samples `every_ns` apart.
 #[derive(Debug, Clone, Copy)]
 struct Decimator {
