@@ -208,5 +208,15 @@ mod tests {
             Check::at_least("b", "b", 0.25, 0.5).line(),
             "[FAIL] b: b: 0.2500 >= 0.5000"
         );
+        // Whole numbers print as such below 10^15, with decimals from there on.
+        let whole = |x: f64| Check::at_most("c", "c", x, x).line();
+        assert_eq!(
+            whole(999_999_999_999_999.0),
+            "[ok] c: c: 999999999999999 <= 999999999999999"
+        );
+        assert_eq!(
+            whole(1e15),
+            "[ok] c: c: 1000000000000000.0000 <= 1000000000000000.0000"
+        );
     }
 }

@@ -303,6 +303,130 @@ mod tests {
         assert_eq!(c.accepted, 1);
     }
 
+    /// Counts add up by verdict: `refused` is every refusal, `judged` adds the accepted; a tick's
+    /// verdicts (stale, no data) count nothing.
+    #[test]
+    fn counters_add_up_by_verdict() {
+        let mut c = GateCounters::default();
+        let each = [
+            (Verdict::NonFinite, 1),
+            (Verdict::OutOfRange, 2),
+            (Verdict::SeqRepeat, 4),
+            (Verdict::SeqBackwards, 8),
+            (Verdict::Future, 16),
+            (Verdict::Version, 32),
+            (Verdict::Ok, 64),
+            (Verdict::Stale, 128),
+            (Verdict::NoData, 256),
+        ];
+        for (v, n) in each {
+            for _ in 0..n {
+                c.count(v);
+            }
+        }
+        let want = GateCounters {
+            non_finite: 1,
+            out_of_range: 2,
+            seq_repeat: 4,
+            seq_backwards: 8,
+            future: 16,
+            version: 32,
+            accepted: 64,
+            new_epochs: 0,
+        };
+        assert_eq!(c, want);
+        assert_eq!((c.refused(), c.judged()), (63, 127));
+    }
+
+    /// A gate resumed from a predecessor's counts goes on counting from them, but judges the
+    /// next sample afresh (no newest sample carried over).
+    #[test]
+    fn a_resumed_gate_counts_on() {
+        let before = GateCounters {
+            non_finite: 3,
+            accepted: 10,
+            ..Default::default()
+        };
+        let mut g = SampleGate::resume(GateParams::default(), before);
+        assert_eq!(g.counters(), before);
+        assert_eq!(g.current(10_000), Err(Verdict::NoData));
+        assert_eq!(g.offer(&sample(0, 10_000), 10_000), Verdict::Ok);
+        let mut nan = sample(1, 10_000);
+        nan.force_n[0] = f64::NAN;
+        assert_eq!(g.offer(&nan, 10_000), Verdict::NonFinite);
+        assert_eq!((g.counters().accepted, g.counters().non_finite), (11, 4));
+    }
+
+    /// Each limit holds at its boundary and refuses just past it, value by value: every force
+    /// and moment (measured and tare) against the rated range, every timestamp (sample, epoch,
+    /// publication) against the future tolerance.
+    #[test]
+    fn every_limit_holds_at_its_boundary_and_refuses_past_it() {
+        let params = GateParams {
+            force_limit_n: 60.0,
+            torque_limit_nm: 4.0,
+            ..GateParams::default()
+        };
+        let g = SampleGate::new(params);
+        assert_eq!(g.params(), &params);
+        let (f, m) = (params.force_limit_n, params.torque_limit_nm);
+        let now = 1_000_000;
+        let setters: [fn(&mut WrenchSample, f64); 6] = [
+            |s, v| s.force_n[0] = v,
+            |s, v| s.force_n[1] = v,
+            |s, v| s.tare_force_n[0] = v,
+            |s, v| s.tare_force_n[1] = v,
+            |s, v| s.torque_nm = v,
+            |s, v| s.tare_torque_nm = v,
+        ];
+        for (i, set) in setters.iter().enumerate() {
+            let limit = if i < 4 { f } else { m };
+            for sign in [1.0, -1.0] {
+                let mut at = sample(0, now);
+                set(&mut at, sign * limit);
+                assert_eq!(g.judge(&at, now), Verdict::Ok, "value {i} at {sign}·limit");
+                let mut past = sample(0, now);
+                set(&mut past, sign * limit * (1.0 + 1e-9));
+                assert_eq!(
+                    g.judge(&past, now),
+                    Verdict::OutOfRange,
+                    "value {i} past it"
+                );
+            }
+        }
+        let tol = params.future_tolerance_ns;
+        let stamps: [fn(&mut WrenchSample, u64); 3] = [
+            |s, t| s.sample_ns = t,
+            |s, t| s.epoch_ns = t,
+            |s, t| s.publish_ns = t,
+        ];
+        for (i, set) in stamps.iter().enumerate() {
+            let mut at = sample(0, now);
+            set(&mut at, now + tol);
+            assert_eq!(g.judge(&at, now), Verdict::Ok, "stamp {i} at the tolerance");
+            let mut past = sample(0, now);
+            set(&mut past, now + tol + 1);
+            assert_eq!(g.judge(&past, now), Verdict::Future, "stamp {i} past it");
+        }
+    }
+
+    /// Within an epoch the sequence number and the sample time must not go back, each on its
+    /// own; a later sample at the same instant is accepted; no new epoch is counted.
+    #[test]
+    fn sequence_and_time_each_move_forward() {
+        let mut g = SampleGate::new(GateParams::default());
+        let now = 100_000;
+        assert_eq!(g.offer(&sample(5, 50_000), now), Verdict::Ok);
+        // An older number at a later time, a newer number at an earlier time: both backwards.
+        assert_eq!(g.offer(&sample(4, 60_000), now), Verdict::SeqBackwards);
+        assert_eq!(g.offer(&sample(6, 49_999), now), Verdict::SeqBackwards);
+        // A newer number at the same instant: accepted (two readings of one clock tick).
+        assert_eq!(g.offer(&sample(6, 50_000), now), Verdict::Ok);
+        assert_eq!(g.offer(&sample(7, 60_000), now), Verdict::Ok);
+        assert_eq!(g.counters().new_epochs, 0);
+        assert_eq!(g.counters().accepted, 3);
+    }
+
     /// A restarted sensor (later epoch) starts its sequence again and is accepted.
     #[test]
     fn a_new_sensor_epoch_restarts_the_sequence() {
