@@ -33,7 +33,7 @@ fn running_sim() -> Lockstep {
 
 fn benches(c: &mut Criterion) {
     let sim = running_sim();
-    let (q, qd) = sim.plant().joints();
+    let (q, qd) = sim.world().joints();
     let input = ServoInput {
         q,
         qd,

@@ -639,30 +639,10 @@ fn killed_boards_are_restarted_and_the_world_resumes() {
     let run = start_run(&p, &["--scenario", "surface-tracking", "--duration", "12"]);
     wait_running(&p, Duration::from_secs(60));
     for board in ["sensor", "servo"] {
-        let pid = board_pid(&p, board);
-        // SAFETY: signalling a board of our own stack.
-        unsafe {
-            libc::kill(pid, libc::SIGKILL);
-        }
-        // Until its successor runs.
-        let t0 = Instant::now();
-        while board_pid(&p, board) == pid {
-            assert!(
-                t0.elapsed() < Duration::from_secs(30),
-                "{board} not restarted"
-            );
-            std::thread::sleep(Duration::from_millis(100));
-        }
+        kill_board_and_wait_restart(&p, board);
         std::thread::sleep(Duration::from_secs(1));
     }
-    let out = finish(run.take(), "afs run");
-    let r = run_report(&out);
-    assert!(
-        out.status.success(),
-        "{}\n{}",
-        String::from_utf8_lossy(&out.stderr),
-        failed(&r)
-    );
+    let r = finish_passed(run.take(), "afs run");
     assert_eq!(process(&r, "sensor").restarts, 1);
     assert_eq!(process(&r, "servo").restarts, 1);
     // Every world tick once (plus the initial sample 0); a servo killed between publishing a

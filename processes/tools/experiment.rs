@@ -360,6 +360,14 @@ pub struct ExperimentArgs {
     /// those run).
     #[arg(long, default_value = "afs", value_parser = ["afs", "thesis"])]
     pub rig: String,
+    /// The world the servo drives: `builtin` (afs's plant) or `mujoco` (MuJoCo on the model
+    /// afs generates from the set-up; docs/mujoco.md). Applied on top of --config.
+    #[arg(long, value_parser = ["builtin", "mujoco"])]
+    pub plant: Option<String>,
+    /// The servo rate (Hz): 10000 (the thesis's rig), 1000 (Franka FCI), 500 (UR e-Series);
+    /// the dither and tuner settings follow it (docs/mujoco.md, *Rates*).
+    #[arg(long)]
+    pub rate_hz: Option<f64>,
 }
 
 /// The registry's names, `all` and `list`, for `afs experiment --help` and the parser.
@@ -385,6 +393,21 @@ pub fn command(a: &ExperimentArgs, stop: &AtomicBool) -> Result<ExitCode> {
     };
     let rig = Rig::parse(&a.rig).unwrap_or_default();
     rig.apply(&mut base)?;
+    if let Some(kind) = &a.plant {
+        base.world.kind = afs_shared::world::WorldKind::parse(kind)?;
+        if base.world.kind != afs_shared::world::WorldKind::Builtin
+            && experiments::WORLD_FREE.contains(&a.name.as_str())
+        {
+            bail!(
+                "{} does not simulate the arm's world (eq. 4.5's curves, §5.4's box plant: \
+                 docs/mujoco.md); run it without --plant",
+                a.name
+            );
+        }
+    }
+    if let Some(hz) = a.rate_hz {
+        afs_shared::setups::set_rate(&mut base, hz)?;
+    }
     let opts = Options {
         seed: a.seed,
         thesis_table: a.thesis_table,
@@ -396,6 +419,10 @@ pub fn command(a: &ExperimentArgs, stop: &AtomicBool) -> Result<ExitCode> {
         "all" => experiments::REGISTRY
             .iter()
             .filter(|e| rig == Rig::Afs || e.friction)
+            .filter(|e| {
+                opts.base.world.kind == afs_shared::world::WorldKind::Builtin
+                    || !experiments::WORLD_FREE.contains(&e.name)
+            })
             .map(|e| e.name)
             .collect(),
         one => vec![one],

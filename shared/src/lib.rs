@@ -37,3 +37,4 @@ pub mod ticks;
 pub mod tuner;
 pub mod watchdog;
 pub mod window;
+pub mod world;

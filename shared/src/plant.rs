@@ -336,21 +336,14 @@ impl Plant {
         truth.contact_force = force;
         let acc = self.arm.acceleration_at(&pose, self.qd, tau, force);
         truth.tip_acceleration = jac * acc + self.arm.jacobian_dot_at(&pose, self.qd) * self.qd;
-        truth.sensor_wrench = self.sensor_wrench(&pose, force, truth.tip_acceleration);
+        truth.sensor_wrench = sensor_wrench(
+            (pose.s12, pose.c12),
+            self.params.tool_mass_kg,
+            self.params.tool_length_m,
+            force,
+            truth.tip_acceleration,
+        );
         (truth, acc)
-    }
-
-    /// The wrench the sensor transmits: contact force minus the tool's inertial force, in the
-    /// sensor frame, with the moment about the sensor origin (tool length behind the tip).
-    fn sensor_wrench(&self, pose: &crate::arm::Pose, contact_force: Vec2, tip_acc: Vec2) -> Wrench {
-        let (s, c) = (pose.s12, pose.c12);
-        let xe = Vec2::new(c, s);
-        let f = contact_force - tip_acc * self.params.tool_mass_kg;
-        let moment = cross(xe * self.params.tool_length_m, f);
-        Wrench {
-            force: Vec2::new(c * f.x + s * f.y, -s * f.x + c * f.y),
-            torque: moment,
-        }
     }
 
     /// Advances the world by `dt` (s) under joint torques `tau` (N·m).
@@ -360,6 +353,27 @@ impl Plant {
         self.q += self.qd * dt;
         self.time_s += dt;
         self.truth = truth;
+    }
+}
+
+/// The wrench the sensor transmits: contact force minus the tool's inertial force
+/// (`tool_mass_kg` × tip acceleration), in the sensor frame (x along link 2, whose angle's
+/// sine and cosine are `link2`), with the moment about the sensor origin (`tool_length_m`
+/// behind the tip). Every world (built-in, MuJoCo) reports its sensor wrench through this.
+pub fn sensor_wrench(
+    link2: (f64, f64),
+    tool_mass_kg: f64,
+    tool_length_m: f64,
+    contact_force: Vec2,
+    tip_acc: Vec2,
+) -> Wrench {
+    let (s, c) = link2;
+    let xe = Vec2::new(c, s);
+    let f = contact_force - tip_acc * tool_mass_kg;
+    let moment = cross(xe * tool_length_m, f);
+    Wrench {
+        force: Vec2::new(c * f.x + s * f.y, -s * f.x + c * f.y),
+        torque: moment,
     }
 }
 

@@ -111,6 +111,19 @@ impl Rig {
     }
 }
 
+/// The servo rates of real arms afs is measured at: the thesis's direct-drive rig, Franka's
+/// FCI and Universal Robots' e-Series (Hz).
+pub const ROBOT_RATES_HZ: [f64; 3] = [10_000.0, 1_000.0, 500.0];
+
+/// Sets the servo rate. The dither (10 Hz), the joint bandwidths (3 and 15 Hz) and the
+/// tangent strokes (1 Hz) sit well below the Nyquist frequency of every rate in
+/// [`ROBOT_RATES_HZ`], so they stay; [`crate::servo::ServoParams::validate`] refuses a rate
+/// they do not fit (docs/mujoco.md, *Rates*).
+pub fn set_rate(cfg: &mut SimConfig, rate_hz: f64) -> Result<(), crate::error::ConfigError> {
+    cfg.servo.rate_hz = rate_hz;
+    cfg.servo.validate()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

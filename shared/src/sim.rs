@@ -1,16 +1,17 @@
 //! The deterministic lockstep simulation: plant, force sensor and servo stepped together in
 //! simulated time, with seeded noise. The sensor samples at its own rate (default 7 kHz) and the
 //! servo (default 10 kHz) uses the latest sample, exactly as the multi-process stack does in
-//! real time; the same [`Plant`], [`SensorModel`] and [`ServoCore`] code runs in both.
+//! real time; the same [`World`], [`SensorModel`] and [`ServoCore`] code runs in both.
 
 use crate::arm::{Arm, Elbow};
 use crate::error::{ConfigError, SnapshotError};
 use crate::math::Vec2;
-use crate::plant::{Plant, PlantParams, PlantTruth};
+use crate::plant::{PlantParams, PlantTruth};
 use crate::sensor::{Reading, SensorModel, SensorParams, Wrench};
 use crate::servo::{ServoCore, ServoInput, ServoParams};
 use crate::surface::Surface;
 use crate::tangent::{self, TangentOutcome};
+use crate::world::{World, WorldConfig};
 use serde::{Deserialize, Serialize};
 
 /// Everything that defines a simulated set-up.
@@ -31,6 +32,8 @@ pub struct SimConfig {
     pub tangent_error_rad: f64,
     /// Seed of the sensor noise.
     pub seed: u64,
+    /// Which world the servo drives (builtin or MuJoCo).
+    pub world: WorldConfig,
 }
 
 impl Default for SimConfig {
@@ -51,6 +54,7 @@ impl Default for SimConfig {
             start_u_m: 0.0,
             tangent_error_rad: 0.0,
             seed: 1,
+            world: WorldConfig::default(),
         }
     }
 }
@@ -62,6 +66,7 @@ impl SimConfig {
         self.surface.validate()?;
         self.sensor.validate()?;
         self.servo.validate()?;
+        self.world.validate()?;
         if !self.start_u_m.is_finite() || !self.tangent_error_rad.is_finite() {
             return Err(ConfigError::rule(
                 "start_u_m and tangent_error_rad",
@@ -121,7 +126,7 @@ pub struct EstimateLog {
 /// The three boards in lockstep.
 #[derive(Debug, Clone)]
 pub struct Lockstep {
-    plant: Plant,
+    world: World,
     sensor: SensorModel,
     servo: ServoCore,
     /// The servo as built, before its first tick: what a restarted servo starts from.
@@ -142,14 +147,14 @@ impl Lockstep {
     pub fn new(cfg: &SimConfig) -> Result<Self, ConfigError> {
         cfg.validate()?;
         let q = cfg.start_configuration()?;
-        let plant = Plant::new(cfg.plant.clone(), cfg.surface.clone(), q);
+        let world = World::new(cfg, q)?;
         let mut sensor = SensorModel::new(cfg.sensor, cfg.seed);
         let tare = tare(&mut sensor);
         // The sensor has been reading the contact for 10 ms (many filter time constants)
         // when the servo starts.
-        let mut reading = sensor.sample(plant.truth().sensor_wrench);
+        let mut reading = sensor.sample(world.truth().sensor_wrench);
         for _ in 0..(0.01 * cfg.sensor.rate_hz).ceil() as usize {
-            reading = sensor.sample(plant.truth().sensor_wrench);
+            reading = sensor.sample(world.truth().sensor_wrench);
         }
         let tangent = cfg.surface.tangent_angle_at(cfg.start_u_m) + cfg.tangent_error_rad;
         let mut wrench0 = reading.wrench;
@@ -165,7 +170,7 @@ impl Lockstep {
         )?;
         servo.set_tare(tare);
         Ok(Self {
-            plant,
+            world,
             sensor,
             fresh: servo.clone(),
             servo,
@@ -185,11 +190,11 @@ impl Lockstep {
     pub fn step(&mut self) {
         let t = self.ticks as f64 * self.dt;
         while (self.sensor_ticks as f64) * self.sensor_period <= t + 1e-12 {
-            self.reading = self.sensor.sample(self.plant.truth().sensor_wrench);
+            self.reading = self.sensor.sample(self.world.truth().sensor_wrench);
             self.reading_time = self.sensor_ticks as f64 * self.sensor_period;
             self.sensor_ticks += 1;
         }
-        let (q, qd) = self.plant.joints();
+        let (q, qd) = self.world.joints();
         let input = ServoInput {
             q,
             qd,
@@ -197,7 +202,7 @@ impl Lockstep {
             force_valid: self.force_valid,
         };
         let tau = self.servo.step(&input, self.dt);
-        self.plant.step(tau, self.dt);
+        self.world.step(tau, self.dt);
         self.ticks += 1;
         self.answer_estimator();
     }
@@ -217,7 +222,7 @@ impl Lockstep {
         let log = EstimateLog {
             time_s: self.time(),
             base_angle_rad: req.base_angle,
-            true_angle_rad: self.plant.truth().tangent_angle_rad,
+            true_angle_rad: self.world.truth().tangent_angle_rad,
             outcome,
         };
         self.servo.apply_tangent_outcome(&outcome);
@@ -271,19 +276,19 @@ impl Lockstep {
         self.dt
     }
 
-    /// The plant.
-    pub fn plant(&self) -> &Plant {
-        &self.plant
+    /// The world (built-in plant or MuJoCo).
+    pub fn world(&self) -> &World {
+        &self.world
     }
 
-    /// Moves the surface in the world ([`Plant::set_surface`]).
+    /// Moves the surface in the world ([`World::set_surface`]).
     pub fn set_surface(&mut self, surface: Surface) {
-        self.plant.set_surface(surface);
+        self.world.set_surface(surface);
     }
 
     /// The world truth of the last step.
     pub fn truth(&self) -> &PlantTruth {
-        self.plant.truth()
+        self.world.truth()
     }
 
     /// The servo.

@@ -60,6 +60,30 @@ pub struct Surface {
     pub shape: Shape,
 }
 
+/// The surface coordinate of the point of the sinusoid `h(s) = amplitude · sin(2π s /
+/// wavelength)` nearest to the local point (u, w): Newton on
+/// `g(s) = (s − u) + (h(s) − w) h'(s)` from s = u.
+pub fn closest_on_sinusoid(u: f64, w: f64, amplitude_m: f64, wavelength_m: f64) -> f64 {
+    let k = std::f64::consts::TAU / wavelength_m;
+    let mut s = u;
+    for _ in 0..8 {
+        let hs = amplitude_m * (k * s).sin();
+        let h1 = amplitude_m * k * (k * s).cos();
+        let h2 = -amplitude_m * k * k * (k * s).sin();
+        let g = (s - u) + (hs - w) * h1;
+        let dg = 1.0 + h1 * h1 + (hs - w) * h2;
+        if dg.abs() < 1e-12 {
+            break;
+        }
+        let step = g / dg;
+        s -= step;
+        if step.abs() < 1e-13 {
+            break;
+        }
+    }
+    s
+}
+
 /// Largest polyline the contact query handles.
 pub const MAX_VERTICES: usize = 64;
 
@@ -251,23 +275,7 @@ impl Surface {
                 if w >= h(u) {
                     return out;
                 }
-                // Closest point on the curve by Newton on g(s) = (s−u) + (h(s)−w) h'(s).
-                let mut s = u;
-                for _ in 0..8 {
-                    let hs = amplitude_m * (k * s).sin();
-                    let h1 = amplitude_m * k * (k * s).cos();
-                    let h2 = -amplitude_m * k * k * (k * s).sin();
-                    let g = (s - u) + (hs - w) * h1;
-                    let dg = 1.0 + h1 * h1 + (hs - w) * h2;
-                    if dg.abs() < 1e-12 {
-                        break;
-                    }
-                    let step = g / dg;
-                    s -= step;
-                    if step.abs() < 1e-13 {
-                        break;
-                    }
-                }
+                let s = closest_on_sinusoid(u, w, *amplitude_m, *wavelength_m);
                 let hs = h(s);
                 let slope = amplitude_m * k * (k * s).cos();
                 let depth = ((s - u).powi(2) + (hs - w).powi(2)).sqrt();

@@ -35,7 +35,7 @@ pub(crate) fn record(sim: &Lockstep, last_phase: &mut f64) -> Tick {
     };
     let period_end = d.dither_phase < *last_phase;
     *last_phase = d.dither_phase;
-    let f_ref = sim.plant().params().reference_normal_force_n;
+    let f_ref = sim.world().params().reference_normal_force_n;
     Tick {
         t: sim.time(),
         friction: -d.tangential_force_n * dir,

@@ -73,3 +73,32 @@ fn a_step_allocates_nothing_with_the_cost_tuner() {
         0
     );
 }
+
+/// On MuJoCo too (its own C code works in its preallocated arena; this counts Rust's side:
+/// the torques in, the truth and the contact forces out, the curved surface's tangent plane).
+#[cfg(feature = "mujoco")]
+#[test]
+fn a_step_on_mujoco_allocates_nothing() {
+    for shape in [
+        afs_shared::surface::Shape::Plane,
+        afs_shared::surface::Shape::Sinusoid {
+            amplitude_m: 0.003,
+            wavelength_m: 0.12,
+        },
+    ] {
+        let mut cfg = SimConfig::default();
+        cfg.world.kind = afs_shared::world::WorldKind::Mujoco;
+        cfg.world.mujoco.applied_friction = true;
+        cfg.surface.shape = shape;
+        let mut sim = Lockstep::new(&cfg).expect("default set-up is valid");
+        sim.servo_mut().hybrid_mut().set_velocity(0.01);
+        sim.servo_mut().set_a_omega(0.02);
+        sim.run(100);
+        let before = ALLOCATIONS.with(Cell::get);
+        for _ in 0..5_000 {
+            sim.step();
+            std::hint::black_box(sim.world().state());
+        }
+        assert_eq!(ALLOCATIONS.with(Cell::get) - before, 0);
+    }
+}

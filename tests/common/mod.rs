@@ -197,3 +197,34 @@ pub fn board_pid(prefix: &str, name: &str) -> i32 {
         v.nodes.iter().find(|n| n.name == name).map(|n| n.pid)
     })
 }
+
+/// Kills board `name` of the stack on `prefix` (SIGKILL) and waits until its successor runs.
+pub fn kill_board_and_wait_restart(prefix: &str, name: &str) {
+    let pid = board_pid(prefix, name);
+    // SAFETY: signalling a board of our own stack.
+    unsafe {
+        libc::kill(pid, libc::SIGKILL);
+    }
+    let t0 = Instant::now();
+    while board_pid(prefix, name) == pid {
+        assert!(
+            t0.elapsed() < Duration::from_secs(30),
+            "{name} not restarted"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// Waits for `afs run` (started by [`start_run`]) to end and returns its report, failing with
+/// its stderr and failed checks unless it exited 0.
+pub fn finish_passed(child: Child, what: &str) -> RunReport {
+    let out = finish(child, what);
+    let r = run_report(&out);
+    assert!(
+        out.status.success(),
+        "{}\n{}",
+        String::from_utf8_lossy(&out.stderr),
+        failed(&r)
+    );
+    r
+}

@@ -12,11 +12,11 @@ use afs_shared::msg::{
     Board, Command, LoopFlags, LoopStats, PlantSample, ServoFlags, ServoSample, WorldSnapshot,
     WrenchFlags, WrenchSample,
 };
-use afs_shared::plant::{Plant, PlantState};
 use afs_shared::scenario::{DriverState, Scenario, ScenarioDriver};
 use afs_shared::sensor::Wrench;
 use afs_shared::servo::{ServoCore, ServoInput, ServoMode};
 use afs_shared::watchdog::{GateCounters, GateParams, SampleGate, Verdict};
+use afs_shared::world::{World, WorldStateAny};
 use anyhow::{Context, Result, bail};
 use iceoryx2::port::update_connections::UpdateConnections;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -34,7 +34,7 @@ pub(super) enum Tick {
 /// and the loop's statistics.
 pub(super) struct ServoBoard {
     servo: ServoCore,
-    plant: Plant,
+    plant: World,
     driver: ScenarioDriver,
     gate: SampleGate,
     /// The gate's verdicts on the samples flagged as injected (`afs chaos`).
@@ -81,7 +81,7 @@ impl ServoBoard {
         // The world: fresh, or where the last servo left it, with the counts that go on
         // across restarts.
         let q0 = cfg.start_configuration().map_err(anyhow::Error::msg)?;
-        let mut plant = Plant::new(cfg.plant.clone(), cfg.surface.clone(), q0);
+        let mut plant = World::new(cfg, q0).map_err(anyhow::Error::msg)?;
         let snapshot = match (&ports.world, args.resume) {
             (Some(w), true) => w.newest()?,
             _ => None,
@@ -94,7 +94,9 @@ impl ServoBoard {
         };
         let (mut gate, mut injected) = (SampleGate::new(gate_params), GateCounters::default());
         if let Some(s) = &snapshot {
-            plant.restore(&PlantState::from(&s.world));
+            plant
+                .restore(&WorldStateAny::from(&s.world))
+                .map_err(anyhow::Error::msg)?;
             gate = SampleGate::resume(gate_params, s.gate);
             injected = s.injected;
         }
@@ -405,7 +407,7 @@ impl ForceInput<'_> {
 /// bit as that one wrote it to the world blackboard before sending it (if it died between the
 /// two, the tick is delivered now; if not, subscribers recognise the repeat,
 /// docs/reliability.md); otherwise the world as it stands, tick `seq`.
-fn first_world_sample(plant: &Plant, snapshot: Option<&WorldSnapshot>, seq: u64) -> PlantSample {
+fn first_world_sample(plant: &World, snapshot: Option<&WorldSnapshot>, seq: u64) -> PlantSample {
     match snapshot {
         Some(s) if s.plant.version == PlantSample::VERSION && s.plant.seq == s.seq => s.plant,
         _ => {
@@ -425,7 +427,7 @@ fn controller(
     q0: afs_shared::math::Vec2,
     first: &WrenchSample,
     snapshot: Option<&WorldSnapshot>,
-    plant: &Plant,
+    plant: &World,
 ) -> Result<(ServoCore, ScenarioDriver)> {
     let cfg = &scenario.cfg;
     let tangent0 = cfg.surface.tangent_angle_at(cfg.start_u_m) + cfg.tangent_error_rad;

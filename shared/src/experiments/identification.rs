@@ -83,7 +83,10 @@ pub struct FrictionIdSummary {
 pub fn friction_id(opts: &Options) -> Result<Outcome<FrictionIdSummary>, ExperimentError> {
     let mut cfg = config(opts, TunerConfig::Fixed);
     cfg.servo.hybrid.tangential_acceleration_m_per_s2 = 2.0;
-    let truth = cfg.plant.friction;
+    // Eq. 4.5 must be in the world to be identified: on MuJoCo its Stribeck and viscous terms
+    // join the Coulomb cone as applied forces (docs/mujoco.md).
+    cfg.world.mujoco.applied_friction = true;
+    let truth = crate::world::friction_law(&cfg);
     let f_ref = cfg.plant.reference_normal_force_n;
     let mut sim = Lockstep::new(&cfg)?;
     let speeds: [f64; 17] = [
@@ -207,7 +210,7 @@ impl Stroke {
                 let frame = *sim.servo().hybrid().frame();
                 f += frame.normal() * d.normal_force_n + frame.tangent() * d.tangential_force_n;
                 ts += sim.time();
-                let q = sim.plant().joints().0;
+                let q = sim.world().joints().0;
                 phi += q[0] + q[1];
                 let vv = d.tangent_velocity_m_per_s * dir;
                 vs += vv;
@@ -367,7 +370,8 @@ pub fn fig4_6(opts: &Options) -> Result<Outcome<Fig46Summary>, ExperimentError> 
         }
         let n_samples = 2.0 * THESIS_FIG_4_6.len() as f64 * ((1.5 - 0.3) / sim.dt()).round();
         let speed = vsum / n_samples;
-        let mu = cfg.plant.friction.resistance(speed) / cfg.plant.reference_normal_force_n;
+        let mu =
+            crate::world::friction_law(&cfg).resistance(speed) / cfg.plant.reference_normal_force_n;
         (trials, sim.time(), Some(mu), Some(speed))
     };
     let pairs: Vec<(f64, f64)> = trials.iter().map(|p| (p[0], p[1])).collect();

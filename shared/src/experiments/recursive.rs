@@ -119,7 +119,7 @@ fn run(
     for i in 0..steps {
         if i % every == 0 {
             // Turn the surface about the contact point.
-            let mut s = sim.plant().surface().clone();
+            let mut s = sim.world().surface().clone();
             let c = sim.truth().tip;
             let d = rate * every as f64 * dt;
             let o = Vec2::new(s.frame.origin_m[0], s.frame.origin_m[1]) - c;

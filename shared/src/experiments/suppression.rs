@@ -58,7 +58,7 @@ pub fn fig4_5(opts: &Options) -> Result<Outcome<Fig45Summary>, ExperimentError> 
         traces.push(ticks);
     }
     let (off, on) = (runs[0], runs[1]);
-    let law = cfg.plant.friction;
+    let law = crate::world::friction_law(&cfg);
     let (q_seen, _) = law.cycle_by_quadrature(on.velocity_seen_m_per_s, on.a_omega_seen_m_per_s);
     let (q_cmd, _) = law.cycle_by_quadrature(on.velocity_seen_m_per_s, ratio * v);
     let q_seen = q_seen * on.friction_scale;
@@ -183,7 +183,7 @@ pub fn fig4_7(opts: &Options) -> Result<Outcome<Fig47Summary>, ExperimentError> 
     let mut ticks = Vec::new();
     let mut ph = 0.0;
     let mut steps = Vec::new();
-    let law = cfg.plant.friction;
+    let law = crate::world::friction_law(&cfg);
     for &a in &amplitudes {
         let t0 = sim.time();
         sim.servo_mut().set_a_omega(a * omega);

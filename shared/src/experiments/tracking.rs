@@ -721,7 +721,7 @@ pub(crate) fn run_correlation(
     let mut dither = 0.0;
     for k in 0..(300.0 / dt) as usize {
         // Position along the profile from the encoders.
-        let x = sim.plant().arm().forward(sim.plant().joints().0).x - frame_origin[0];
+        let x = sim.world().arm().forward(sim.world().joints().0).x - frame_origin[0];
         let (h, slope) = tracker.model(x);
         // Desired tool height h − δ0 + dither, as depth below the frame origin.
         let depth = origin_y - (frame_origin[1] + h - depth0 + dither);

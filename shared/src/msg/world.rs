@@ -5,6 +5,7 @@ use crate::plant::PlantState;
 use crate::scenario::DriverMemo;
 use crate::servo::ServoState;
 use crate::watchdog::GateCounters;
+use crate::world::{MUJOCO_STATE_LEN, MujocoState, WorldStateAny};
 use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
@@ -32,8 +33,42 @@ wire_struct! {
         pub q_rad: [f64; 2],
         /// Joint rates (rad/s).
         pub qd_rad_per_s: [f64; 2],
-        /// The two contact slots' friction states.
+        /// The two contact slots' friction states (the built-in world).
         pub friction: [FrictionSlot; 2],
+        /// Which world: 0 the built-in plant, 1 MuJoCo.
+        pub kind: u32,
+        /// How many of `mujoco` are used.
+        pub mujoco_len: u32,
+        /// MuJoCo's state (`mj_getState`: time, joints, warm start, surface pose).
+        pub mujoco: [f64; MUJOCO_STATE_LEN],
+    }
+}
+
+impl From<&WorldStateAny> for WorldState {
+    fn from(st: &WorldStateAny) -> Self {
+        match st {
+            WorldStateAny::Builtin(p) => p.into(),
+            WorldStateAny::Mujoco(m) => Self {
+                time_s: m.values[0],
+                kind: 1,
+                mujoco_len: m.len as u32,
+                mujoco: m.values,
+                ..Default::default()
+            },
+        }
+    }
+}
+
+impl From<&WorldState> for WorldStateAny {
+    fn from(w: &WorldState) -> Self {
+        if w.kind == 1 {
+            WorldStateAny::Mujoco(MujocoState {
+                len: (w.mujoco_len as usize).min(MUJOCO_STATE_LEN),
+                values: w.mujoco,
+            })
+        } else {
+            WorldStateAny::Builtin(w.into())
+        }
     }
 }
 
@@ -48,6 +83,7 @@ impl From<&PlantState> for WorldState {
             q_rad: st.q,
             qd_rad_per_s: st.qd,
             friction: st.friction.map(slot),
+            ..Default::default()
         }
     }
 }
@@ -107,12 +143,12 @@ impl From<&DriverMemoMsg> for DriverMemo {
 }
 
 wire_message! {
-    version = 2;
+    version = 3;
     /// The world's state the servo keeps in the supervisor's blackboard so that a restarted
     /// servo resumes the world, its controller and its counts where they were (one entry per
     /// servo incarnation of [`service::WORLD`](super::service::WORLD)).
     #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
-    #[type_name("afs::WorldSnapshot.v2")]
+    #[type_name("afs::WorldSnapshot.v3")]
     pub struct WorldSnapshot {
         /// The layout version, `Self::VERSION`; 0 means "no snapshot yet".
         pub version: u32,

@@ -219,6 +219,16 @@ impl ServoParams {
         }
         self.hybrid.validate()?;
         self.dither.validate()?;
+        if self.dither.frequency_hz > self.rate_hz / 10.0 {
+            return Err(ConfigError::setting(
+                "dither.frequency_hz",
+                self.dither.frequency_hz,
+                format!(
+                    "must stay well below the servo's Nyquist frequency: at most rate_hz/10 = {}",
+                    self.rate_hz / 10.0
+                ),
+            ));
+        }
         self.safe.validate()?;
         self.tuner.validate()?;
         self.friction_model.validate()?;

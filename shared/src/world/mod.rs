@@ -1,0 +1,333 @@
+//! The world the servo drives, chosen by configuration: afs's own [`Plant`] (`builtin`) or
+//! MuJoCo (`mujoco`, cargo feature `mujoco`, docs/mujoco.md).
+//!
+//! The boundary is what a real arm and sensor give a controller: joint torques go in
+//! ([`World::step`]); joint angles and rates ([`World::joints`]) and the true contact wrench
+//! at the sensor ([`PlantTruth::sensor_wrench`], which the sensor model turns into readings)
+//! come out. The rest of [`PlantTruth`] is the ideal observer's view that the checks and plots
+//! use; nothing in the controller reads it.
+
+pub mod mjcf;
+#[cfg(feature = "mujoco")]
+mod mujoco;
+#[cfg(feature = "mujoco")]
+pub use mujoco::{MujocoWorld, warnings as mujoco_warnings};
+
+use crate::arm::Arm;
+use crate::error::ConfigError;
+use crate::plant::{Plant, PlantParams, PlantState, PlantTruth};
+use crate::sim::SimConfig;
+use crate::surface::Surface;
+use nalgebra::Vector2;
+use serde::{Deserialize, Serialize};
+
+/// Which world the servo drives.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum WorldKind {
+    /// afs's own plant (docs/model.md).
+    #[default]
+    Builtin,
+    /// MuJoCo, on a model afs generates from the set-up or on the user's own (docs/mujoco.md).
+    Mujoco,
+}
+
+impl WorldKind {
+    /// Its name in configuration and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            WorldKind::Builtin => "builtin",
+            WorldKind::Mujoco => "mujoco",
+        }
+    }
+
+    /// The kind named `s` (`builtin`, `mujoco`).
+    pub fn parse(s: &str) -> Result<Self, ConfigError> {
+        match s {
+            "builtin" => Ok(WorldKind::Builtin),
+            "mujoco" => Ok(WorldKind::Mujoco),
+            _ => Err(ConfigError::rule(
+                "world.kind",
+                format!("is `{s}`; use `builtin` or `mujoco`"),
+            )),
+        }
+    }
+}
+
+/// The MuJoCo model's settings (generated models; a user's model keeps its own contact).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MujocoParams {
+    /// Radius of the tool's contact sphere (m); the surface geoms sit this far inside the
+    /// surface, so the sphere touches when the tool tip reaches it.
+    pub tool_radius_m: f64,
+    /// Constraint impedance d (solimp's dmin = dmax): with solref's direct form set from it,
+    /// the static contact stiffness is the set-up's k_e whatever d (docs/mujoco.md).
+    pub impedance: f64,
+    /// Ratio of frictional to normal impedance (MuJoCo's `impratio`): the larger, the less the
+    /// tool creeps under a tangential force inside the friction cone.
+    pub impratio: f64,
+    /// The damping of the friction directions (N·s/m, solreffriction's direct form): below the
+    /// cone, MuJoCo's friction resists sliding like this damper; the larger, the closer to
+    /// stick (docs/mujoco.md).
+    pub friction_damping_n_s_per_m: f64,
+    /// Iterations of MuJoCo's noslip post-solver (0: off), which removes the friction
+    /// directions' slip that the soft model allows.
+    pub noslip_iterations: u32,
+    /// MuJoCo's pyramidal friction cone instead of the elliptic one.
+    pub pyramidal: bool,
+    /// Add eq. 4.5's Stribeck and viscous terms as applied forces on the tool, beside MuJoCo's
+    /// Coulomb cone (false: MuJoCo's friction alone).
+    pub applied_friction: bool,
+    /// Half the length of the generated surface along its base tangent (m).
+    pub surface_half_length_m: f64,
+}
+
+impl Default for MujocoParams {
+    fn default() -> Self {
+        Self {
+            tool_radius_m: 0.5e-3,
+            impedance: 0.01,
+            impratio: 1e5,
+            friction_damping_n_s_per_m: 5.0,
+            pyramidal: false,
+            noslip_iterations: 0,
+            applied_friction: false,
+            surface_half_length_m: 0.25,
+        }
+    }
+}
+
+impl MujocoParams {
+    /// Checks every setting; the message names it.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let positive = [
+            ("world.mujoco.tool_radius_m", self.tool_radius_m),
+            ("world.mujoco.impratio", self.impratio),
+            (
+                "world.mujoco.friction_damping_n_s_per_m",
+                self.friction_damping_n_s_per_m,
+            ),
+            (
+                "world.mujoco.surface_half_length_m",
+                self.surface_half_length_m,
+            ),
+        ];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(ConfigError::setting(name, v, "must be > 0"));
+            }
+        }
+        if !(self.impedance > 0.0 && self.impedance < 1.0) {
+            return Err(ConfigError::setting(
+                "world.mujoco.impedance",
+                self.impedance,
+                "must lie strictly between 0 and 1",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Which world, and how it is built.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct WorldConfig {
+    /// builtin or mujoco.
+    pub kind: WorldKind,
+    /// A user's MJCF file (mujoco only): a planar arm with two hinge joints, a site named
+    /// `tool` and a body named `surface`. None: afs generates the model from the set-up.
+    pub mjcf: Option<String>,
+    /// The generated MuJoCo model's settings.
+    pub mujoco: MujocoParams,
+}
+
+impl WorldConfig {
+    /// Checks the settings.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        self.mujoco.validate()?;
+        if self.mjcf.is_some() && self.kind != WorldKind::Mujoco {
+            return Err(ConfigError::rule(
+                "world.mjcf",
+                "is a MuJoCo model; set world.kind = \"mujoco\" (or --plant mujoco) with it",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The world of one set-up.
+#[derive(Debug, Clone)]
+pub enum World {
+    /// afs's own plant.
+    Builtin(Plant),
+    /// MuJoCo.
+    #[cfg(feature = "mujoco")]
+    Mujoco(MujocoWorld),
+}
+
+impl World {
+    /// The world of `cfg` with the arm at rest at `q`.
+    pub fn new(cfg: &SimConfig, q: Vector2<f64>) -> Result<Self, ConfigError> {
+        match cfg.world.kind {
+            WorldKind::Builtin => Ok(World::Builtin(Plant::new(
+                cfg.plant.clone(),
+                cfg.surface.clone(),
+                q,
+            ))),
+            #[cfg(feature = "mujoco")]
+            WorldKind::Mujoco => Ok(World::Mujoco(MujocoWorld::new(cfg, q)?)),
+            #[cfg(not(feature = "mujoco"))]
+            WorldKind::Mujoco => Err(ConfigError::rule(
+                "world.kind",
+                "is `mujoco` but this afs was built without MuJoCo; build it with \
+                 `--features mujoco` after `python3 examples/python/mujoco_link.py` (README)",
+            )),
+        }
+    }
+
+    /// Which world this is.
+    pub fn kind(&self) -> WorldKind {
+        match self {
+            World::Builtin(_) => WorldKind::Builtin,
+            #[cfg(feature = "mujoco")]
+            World::Mujoco(_) => WorldKind::Mujoco,
+        }
+    }
+
+    /// The arm model (for a user's MJCF, the one read from it).
+    pub fn arm(&self) -> &Arm {
+        match self {
+            World::Builtin(p) => p.arm(),
+            #[cfg(feature = "mujoco")]
+            World::Mujoco(m) => m.arm(),
+        }
+    }
+
+    /// The physical parameters of the set-up.
+    pub fn params(&self) -> &PlantParams {
+        match self {
+            World::Builtin(p) => p.params(),
+            #[cfg(feature = "mujoco")]
+            World::Mujoco(m) => m.params(),
+        }
+    }
+
+    /// The surface.
+    pub fn surface(&self) -> &Surface {
+        match self {
+            World::Builtin(p) => p.surface(),
+            #[cfg(feature = "mujoco")]
+            World::Mujoco(m) => m.surface(),
+        }
+    }
+
+    /// Moves the surface (its frame; the shape stays): the next step sees it.
+    pub fn set_surface(&mut self, surface: Surface) {
+        match self {
+            World::Builtin(p) => p.set_surface(surface),
+            #[cfg(feature = "mujoco")]
+            World::Mujoco(m) => m.set_surface(surface),
+        }
+    }
+
+    /// Truth at the start of the last step.
+    pub fn truth(&self) -> &PlantTruth {
+        match self {
+            World::Builtin(p) => p.truth(),
+            #[cfg(feature = "mujoco")]
+            World::Mujoco(m) => m.truth(),
+        }
+    }
+
+    /// Simulated time (s).
+    pub fn time(&self) -> f64 {
+        match self {
+            World::Builtin(p) => p.time(),
+            #[cfg(feature = "mujoco")]
+            World::Mujoco(m) => m.time(),
+        }
+    }
+
+    /// Joint angles and rates (what the encoders read).
+    pub fn joints(&self) -> (Vector2<f64>, Vector2<f64>) {
+        match self {
+            World::Builtin(p) => p.joints(),
+            #[cfg(feature = "mujoco")]
+            World::Mujoco(m) => m.joints(),
+        }
+    }
+
+    /// Advances the world by `dt` (s) under joint torques `tau` (N·m).
+    pub fn step(&mut self, tau: Vector2<f64>, dt: f64) {
+        match self {
+            World::Builtin(p) => p.step(tau, dt),
+            #[cfg(feature = "mujoco")]
+            World::Mujoco(m) => m.step(tau),
+        }
+    }
+
+    /// Snapshot of the dynamic state (what a restarted servo resumes).
+    pub fn state(&self) -> WorldStateAny {
+        match self {
+            World::Builtin(p) => WorldStateAny::Builtin(p.state()),
+            #[cfg(feature = "mujoco")]
+            World::Mujoco(m) => WorldStateAny::Mujoco(m.state()),
+        }
+    }
+
+    /// Restores a snapshot taken by [`World::state`] of the same kind of world.
+    pub fn restore(&mut self, s: &WorldStateAny) -> Result<(), ConfigError> {
+        match (self, s) {
+            (World::Builtin(p), WorldStateAny::Builtin(st)) => {
+                p.restore(st);
+                Ok(())
+            }
+            #[cfg(feature = "mujoco")]
+            (World::Mujoco(m), WorldStateAny::Mujoco(st)) => m.restore(st),
+            (w, _) => Err(ConfigError::rule(
+                "world snapshot",
+                format!(
+                    "was taken of another kind of world than this {} one; the world starts afresh",
+                    w.kind().name()
+                ),
+            )),
+        }
+    }
+}
+
+/// A world's dynamic state, of either kind.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum WorldStateAny {
+    /// The built-in plant's state.
+    Builtin(PlantState),
+    /// MuJoCo's integration state (time, joints, warm start, mocap), `len` values used.
+    Mujoco(MujocoState),
+}
+
+/// The most values a MuJoCo state may have here (a planar arm: two joints, one mocap body).
+pub const MUJOCO_STATE_LEN: usize = 32;
+
+/// MuJoCo's state as `mj_getState` gives it (time, qpos, qvel, act, warm start, mocap pose).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MujocoState {
+    /// How many of `values` are used.
+    pub len: usize,
+    /// The values.
+    pub values: [f64; MUJOCO_STATE_LEN],
+}
+
+/// The friction law the world of `cfg` applies, at the plant's reference normal force: the
+/// built-in plant's eq. 4.5; on MuJoCo its Coulomb cone alone (μ F_N, no Stribeck or viscous
+/// term) unless `applied_friction` adds them. The experiments compare with this law.
+pub fn friction_law(cfg: &SimConfig) -> crate::friction::FrictionLaw {
+    let law = cfg.plant.friction;
+    match cfg.world.kind {
+        WorldKind::Mujoco if !cfg.world.mujoco.applied_friction => crate::friction::FrictionLaw {
+            viscous_n_s_per_m: 0.0,
+            stribeck_n: 0.0,
+            ..law
+        },
+        _ => law,
+    }
+}
