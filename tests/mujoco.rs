@@ -87,3 +87,95 @@ fn the_stack_runs_on_mujoco_and_a_killed_servo_resumes_it() {
     assert!(check(&r, "ticks_without_contact").pass);
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
 }
+
+fn user_arm() -> String {
+    std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/examples/mujoco/user-arm.xml"
+    ))
+    .unwrap()
+}
+
+/// A user's own arm (examples/mujoco/user-arm.xml: links of 0.45 m and 0.26 m, other masses):
+/// afs reads its kinematics and mass matrix from the model, tracks fig. 5.6's sinusoid with
+/// it, and runs the stack's surface tracking on the flat surface against its lockstep.
+#[test]
+fn a_users_arm_tracks_the_sinusoid_and_the_flat_surface() {
+    let dir = std::env::temp_dir().join(format!("afs-user-arm-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let model = dir.join("arm.xml");
+    std::fs::write(&model, user_arm()).unwrap();
+    let out = afs()
+        .args(["experiment", "fig5.6", "--json", "--mjcf"])
+        .arg(&model)
+        .arg("--out")
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let p = prefix("mjuser");
+    let _clean = CleanPrefix(p.clone());
+    let stack = dir.join("stack.toml");
+    // examples/stack.toml with the user's model as the world.
+    let base = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/examples/stack.toml"))
+        .unwrap();
+    std::fs::write(
+        &stack,
+        format!(
+            "{base}\n[sim.world]\nkind = \"mujoco\"\nmjcf = {:?}\n",
+            model.display().to_string()
+        ),
+    )
+    .unwrap();
+    let run = start_run(
+        &p,
+        &["--config", stack.to_str().unwrap(), "--duration", "5"],
+    );
+    let r = finish_passed(run.take(), "afs run");
+    assert!(check(&r, "lockstep_agreement").pass, "{:#?}", r.agreement);
+    assert!(check(&r, "ticks_without_contact").pass);
+    assert!(r.stack.tracking.tangent_error_rms_deg < 1.0);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A model that lacks what afs needs is refused before anything runs, exit 2, with what is
+/// missing named.
+#[test]
+fn a_model_without_what_afs_needs_is_refused_by_name() {
+    let good = user_arm();
+    let dir = std::env::temp_dir().join(format!("afs-bad-arm-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    for (broken, needle) in [
+        (good.replace("<site name=\"tool\"", "<site name=\"tip_site\""), "site named `tool`"),
+        (good.replace("<body name=\"surface\"", "<body name=\"table\""), "body named `surface`"),
+        (good.replace(" mocap=\"true\"", ""), "not a mocap body"),
+        (
+            good.replace("damping=\"0.02\"", "damping=\"0.02\" armature=\"0.01\""),
+            "joint armature",
+        ),
+        (
+            good.replace(
+                "<site name=\"tool\" pos=\"0.26 0 0\"/>",
+                "<site name=\"tool\" pos=\"0.26 0 0\"/><body name=\"finger\"><joint type=\"hinge\" axis=\"0 0 1\"/><inertial pos=\"0 0 0\" mass=\"0.1\" diaginertia=\"1e-4 1e-4 1e-4\"/></body>",
+            ),
+            "exactly two hinge joints",
+        ),
+        ("<mujoco><worldbody>".to_string(), "not loaded"),
+    ] {
+        let model = dir.join("arm.xml");
+        std::fs::write(&model, &broken).unwrap();
+        let out = afs()
+            .args(["experiment", "fig5.6", "--mjcf"])
+            .arg(&model)
+            .output()
+            .unwrap();
+        assert_refused(&out, &needle, needle);
+        assert_eq!(out.status.code(), Some(2), "{needle}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -364,6 +364,10 @@ pub struct ExperimentArgs {
     /// afs generates from the set-up; docs/mujoco.md). Applied on top of --config.
     #[arg(long, value_parser = ["builtin", "mujoco"])]
     pub plant: Option<String>,
+    /// A MuJoCo model of your own arm (implies --plant mujoco): two hinge joints about z, a
+    /// site `tool`, a mocap body `surface` (docs/mujoco.md, *Your own arm*).
+    #[arg(long, value_name = "FILE")]
+    pub mjcf: Option<PathBuf>,
     /// The servo rate (Hz): 10000 (the thesis's rig), 1000 (Franka FCI), 500 (UR e-Series);
     /// the dither and tuner settings follow it (docs/mujoco.md, *Rates*).
     #[arg(long)]
@@ -404,6 +408,12 @@ pub fn command(a: &ExperimentArgs, stop: &AtomicBool) -> Result<ExitCode> {
                 a.name
             );
         }
+    }
+    if let Some(path) = &a.mjcf {
+        base.world.kind = afs_shared::world::WorldKind::Mujoco;
+        base.world.mjcf = Some(path.display().to_string());
+        // Refused here, once, with what the model lacks (exit 2).
+        afs_shared::world::resolve(&base)?;
     }
     if let Some(hz) = a.rate_hz {
         afs_shared::setups::set_rate(&mut base, hz)?;

@@ -145,6 +145,7 @@ pub struct Lockstep {
 impl Lockstep {
     /// Builds the set-up at rest in contact at the preload.
     pub fn new(cfg: &SimConfig) -> Result<Self, ConfigError> {
+        let cfg = &crate::world::resolve(cfg)?;
         cfg.validate()?;
         let q = cfg.start_configuration()?;
         let world = World::new(cfg, q)?;

@@ -62,7 +62,9 @@ impl ServoBoard {
     /// publishes it until the first force sample, builds or resumes the controller, and goes
     /// real-time. None if stopped first.
     pub(super) fn start(args: &ServoArgs, stop: &AtomicBool) -> Result<Option<Self>> {
-        let scenario = Scenario::new(&args.scenario, &args.base).map_err(anyhow::Error::msg)?;
+        let mut scenario = Scenario::new(&args.scenario, &args.base).map_err(anyhow::Error::msg)?;
+        // A user's MJCF brings its own arm: the controller and the world both use it.
+        scenario.cfg = afs_shared::world::resolve(&scenario.cfg).map_err(anyhow::Error::msg)?;
         let cfg = &scenario.cfg;
         let dt = cfg.servo.dt();
         let period_ns = (dt * 1e9).round() as u64;

@@ -11,6 +11,8 @@ pub mod mjcf;
 #[cfg(feature = "mujoco")]
 mod mujoco;
 #[cfg(feature = "mujoco")]
+mod user;
+#[cfg(feature = "mujoco")]
 pub use mujoco::{MujocoWorld, warnings as mujoco_warnings};
 
 use crate::arm::Arm;
@@ -153,6 +155,52 @@ impl WorldConfig {
             ));
         }
         Ok(())
+    }
+}
+
+/// The set-up as its world sees it. With a user's MJCF (`world.mjcf`) the arm is read from
+/// the model ([`ArmParams`](crate::arm::ArmParams) replaced, the tool's mass beyond the sensor
+/// taken as 0) and a surface left at the default arm's operating point moves to the new arm's;
+/// otherwise `cfg` unchanged. Every consumer of the set-up (the lockstep, the servo board)
+/// resolves it first, so they all see the same arm.
+pub fn resolve(cfg: &SimConfig) -> Result<SimConfig, ConfigError> {
+    let out = cfg.clone();
+    let Some(path) = &cfg.world.mjcf else {
+        return Ok(out);
+    };
+    if cfg.world.kind != WorldKind::Mujoco {
+        return Err(ConfigError::rule(
+            "world.mjcf",
+            "is a MuJoCo model; set world.kind = \"mujoco\" (or --plant mujoco) with it",
+        ));
+    }
+    #[cfg(feature = "mujoco")]
+    {
+        let mut out = out;
+        let model = user::load(path, cfg.servo.dt())?;
+        out.plant.arm = user::arm_params(path, &model, cfg.plant.arm.torque_limit_nm)?;
+        out.plant.tool_mass_kg = 0.0;
+        out.servo.tool_mass_kg = 0.0;
+        let default = SimConfig::default();
+        if cfg.surface.frame.origin_m == default.surface.frame.origin_m {
+            let arm = Arm::new(out.plant.arm);
+            let q = arm
+                .decoupled_configuration(0.0, out.plant.elbow)
+                .ok_or_else(|| {
+                    ConfigError::rule(
+                        "world.mjcf",
+                        format!("{path}: afs's operating point needs link 1 longer than link 2"),
+                    )
+                })?;
+            let tip = arm.forward(q);
+            out.surface.frame.origin_m = [tip.x, tip.y];
+        }
+        Ok(out)
+    }
+    #[cfg(not(feature = "mujoco"))]
+    {
+        let _ = path;
+        World::new(cfg, Vector2::zeros()).map(|_| out)
     }
 }
 

@@ -114,23 +114,24 @@ impl MujocoWorld {
     /// The world of `cfg` with the arm at rest at `q`.
     pub fn new(cfg: &SimConfig, q: Vector2<f64>) -> Result<Self, ConfigError> {
         install_log_handler();
-        if cfg.world.mjcf.is_some() {
-            return Err(ConfigError::rule(
-                "world.mjcf",
-                "a user's MJCF is not supported yet; leave it out to use afs's generated model",
-            ));
-        }
-        let model = generated_model(cfg)?;
+        let (model, joints) = match &cfg.world.mjcf {
+            // The set-up was resolved (`world::resolve`): its arm is the model's.
+            Some(path) => (super::user::load(path, cfg.servo.dt())?, [0, 1]),
+            None => {
+                let model = generated_model(cfg)?;
+                let j1 = id(&model, mjtObj::mjOBJ_JOINT, "joint1", "joint")?;
+                let j2 = id(&model, mjtObj::mjOBJ_JOINT, "joint2", "joint")?;
+                (model, [j1, j2])
+            }
+        };
         let tool_site = id(&model, mjtObj::mjOBJ_SITE, names::TOOL_SITE, "site")?;
         let tool_body = model.site_bodyid()[tool_site] as usize;
         let surface_body = id(&model, mjtObj::mjOBJ_BODY, names::SURFACE_BODY, "body")?;
         let mocap = usize::try_from(model.body_mocapid()[surface_body]).map_err(|_| {
             ConfigError::rule("world.mjcf", "the body `surface` must be a mocap body")
         })?;
-        let j1 = id(&model, mjtObj::mjOBJ_JOINT, "joint1", "joint")?;
-        let j2 = id(&model, mjtObj::mjOBJ_JOINT, "joint2", "joint")?;
-        let qadr = [j1, j2].map(|j| model.jnt_qposadr()[j] as usize);
-        let vadr = [j1, j2].map(|j| model.jnt_dofadr()[j] as usize);
+        let qadr = joints.map(|j| model.jnt_qposadr()[j] as usize);
+        let vadr = joints.map(|j| model.jnt_dofadr()[j] as usize);
         let mut world = Self {
             data: MjData::new(Arc::new(model)),
             arm: Arm::new(cfg.plant.arm),
