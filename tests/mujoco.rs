@@ -179,3 +179,54 @@ fn a_model_without_what_afs_needs_is_refused_by_name() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `afs bench world --duration 1`: a smoke run of the world part (its shape, not its speed):
+/// both worlds' step series, both stacks' wake series, the three targets, both stacks passed.
+#[test]
+fn bench_world_reports_both_worlds() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let p = prefix("bw");
+    let out_dir = std::env::temp_dir().join(format!("afs-bench-world-{p}"));
+    let out = afs()
+        .args([
+            "bench",
+            "world",
+            "--duration",
+            "1",
+            "--json",
+            "--prefix",
+            &p,
+            "--out",
+        ])
+        .arg(&out_dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r: afs::tools::bench::BenchReport = serde_json::from_slice(&out.stdout).unwrap();
+    let w = r.world.expect("the world part");
+    for s in [
+        "step_builtin",
+        "step_mujoco",
+        "servo_wake_builtin",
+        "servo_wake_mujoco",
+    ] {
+        let q = w.part.series[s].summary_us.quantiles;
+        assert!(q.p50 > 0.0 && q.p50 <= q.p99, "{s}: {q:?}");
+    }
+    let ids: Vec<&str> = w.part.targets.iter().map(|c| c.id.as_str()).collect();
+    assert_eq!(
+        ids,
+        [
+            "mj_step_p99_us",
+            "lockstep_realtime_factor_mujoco",
+            "servo_wake_p99_mujoco_over_builtin"
+        ]
+    );
+    assert!(w.lockstep_realtime_factor_mujoco > 0.0);
+    assert_eq!(w.stacks_passed, [true, true]);
+    let _ = std::fs::remove_dir_all(&out_dir);
+}

@@ -30,6 +30,7 @@ mod link;
 mod stack;
 mod transport;
 mod upstream;
+mod world;
 
 pub use transport::peer;
 
@@ -56,6 +57,9 @@ pub enum Part {
     Stack,
     /// The link board: latency and loss across it (not part of `all`).
     Link,
+    /// The world's step and the servo's wake, MuJoCo against the built-in plant (not part
+    /// of `all`: it needs the feature `mujoco`).
+    World,
     /// Hop, loop and stack.
     All,
 }
@@ -67,12 +71,13 @@ impl Part {
             Part::Loop => "loop",
             Part::Stack => "stack",
             Part::Link => "link",
+            Part::World => "world",
             Part::All => "all",
         }
     }
 
     fn includes(self, p: Part) -> bool {
-        self == p || (self == Part::All && p != Part::Link)
+        self == p || (self == Part::All && p != Part::Link && p != Part::World)
     }
 }
 
@@ -145,6 +150,9 @@ pub struct BenchReport {
     /// The link board.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub link: Option<link::LinkPart>,
+    /// The world's step and the servo's wake on MuJoCo and on the built-in plant.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub world: Option<world::WorldPart>,
     /// Wall time (s).
     pub wall_s: f64,
     /// Stopped by Ctrl-C.
@@ -166,6 +174,9 @@ impl BenchReport {
         }
         if let Some(l) = &self.link {
             v.push(("link", &l.part));
+        }
+        if let Some(w) = &self.world {
+            v.push(("world", &w.part));
         }
         v
     }
@@ -233,6 +244,10 @@ pub fn run(opts: &BenchOptions, stop: &AtomicBool) -> Result<BenchReport> {
         true => Some(link::link(opts, stop)?),
         false => None,
     };
+    let world = match opts.part.includes(Part::World) && !stopped() {
+        true => Some(world::world_part(opts, stop)?),
+        false => None,
+    };
     Ok(BenchReport {
         bench: opts.part.name().into(),
         duration_s: opts.duration_s,
@@ -244,6 +259,7 @@ pub fn run(opts: &BenchOptions, stop: &AtomicBool) -> Result<BenchReport> {
         loop_part,
         stack,
         link,
+        world,
         wall_s: t0.elapsed().as_secs_f64(),
         interrupted: stopped(),
     })
