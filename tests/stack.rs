@@ -391,9 +391,16 @@ fn bad_input_is_refused_clearly() {
     )
     .unwrap();
     let missing_bin = dir.join("missing.toml");
+    // A board that cannot start fails the run after the prefix was claimed: it is given back.
+    let missing_prefix = prefix("nobin");
     std::fs::write(
         &missing_bin,
-        afs::stack::DEFAULT_STACK.replace("binary = \"afs-sensor\"", "binary = \"afs-nope\""),
+        afs::stack::DEFAULT_STACK
+            .replace("binary = \"afs-sensor\"", "binary = \"afs-nope\"")
+            .replace(
+                "prefix = \"afs\"",
+                &format!("prefix = \"{missing_prefix}\""),
+            ),
     )
     .unwrap();
     let cases: Vec<(Vec<String>, &str)> = vec![
@@ -459,6 +466,11 @@ fn bad_input_is_refused_clearly() {
         let out = afs().args(&args).output().unwrap();
         assert_refused(&out, &args, needle);
     }
+    assert!(
+        leftovers(&missing_prefix).is_empty(),
+        "{:?}",
+        leftovers(&missing_prefix)
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -51,10 +51,23 @@ const OBSERVER_GRACE: Duration = Duration::from_secs(3);
 /// Runs a stack until its scenario ends, it is stopped, or it fails; returns its report.
 pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunReport> {
     let mut setup = setup::Setup::prepare(opts)?;
-    let mut sup = setup.supervisor(opts)?;
+    let mut sup = match setup.supervisor(opts) {
+        Ok(sup) => sup,
+        Err(e) => {
+            let _ = setup.release(&[]);
+            return Err(e);
+        }
+    };
     let result = sup.run(stop);
     let wall_s = sup.shut_down();
-    result?;
+    if let Err(e) = result {
+        // A run that fails (a board that cannot start) gives its prefix back all the same:
+        // its processes are stopped; the supervisor's node and the node counter go.
+        let procs = std::mem::take(&mut sup.procs);
+        drop(sup);
+        let _ = setup.release(&procs);
+        return Err(e);
+    }
     let (record, view) = sup.finish_sinks()?;
     let chaos_report = chaos_report(&mut sup);
     let procs = std::mem::take(&mut sup.procs);
