@@ -165,6 +165,14 @@ fn a_model_without_what_afs_needs_is_refused_by_name() {
             ),
             "exactly two hinge joints",
         ),
+        (
+            good.replace(
+                "<body name=\"surface\" mocap=\"true\">",
+                "<body name=\"m1\" mocap=\"true\"/><body name=\"m2\" mocap=\"true\"/>\
+                 <body name=\"m3\" mocap=\"true\"/><body name=\"surface\" mocap=\"true\">",
+            ),
+            "resumable state has",
+        ),
         ("<mujoco><worldbody>".to_string(), "not loaded"),
     ] {
         let model = dir.join("arm.xml");

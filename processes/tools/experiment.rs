@@ -462,6 +462,13 @@ pub fn command(a: &ExperimentArgs, stop: &AtomicBool) -> Result<ExitCode> {
             reports.iter().all(|r| r.passed)
         }
     };
+    let warnings = afs_shared::world::mujoco_warnings();
+    if warnings > 0 {
+        eprintln!(
+            "afs: MuJoCo gave {warnings} warnings (its solver's, counted, not printed); the \
+             figures stand, but the contact settings may be stiff for the step (docs/mujoco.md)"
+        );
+    }
     Ok(if passed {
         ExitCode::SUCCESS
     } else {

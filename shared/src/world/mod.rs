@@ -13,7 +13,7 @@ mod mujoco;
 #[cfg(feature = "mujoco")]
 mod user;
 #[cfg(feature = "mujoco")]
-pub use mujoco::{MujocoWorld, warnings as mujoco_warnings};
+pub use mujoco::MujocoWorld;
 
 use crate::arm::Arm;
 use crate::error::ConfigError;
@@ -164,19 +164,13 @@ impl WorldConfig {
 /// otherwise `cfg` unchanged. Every consumer of the set-up (the lockstep, the servo board)
 /// resolves it first, so they all see the same arm.
 pub fn resolve(cfg: &SimConfig) -> Result<SimConfig, ConfigError> {
-    let out = cfg.clone();
     let Some(path) = &cfg.world.mjcf else {
-        return Ok(out);
+        return Ok(cfg.clone());
     };
-    if cfg.world.kind != WorldKind::Mujoco {
-        return Err(ConfigError::rule(
-            "world.mjcf",
-            "is a MuJoCo model; set world.kind = \"mujoco\" (or --plant mujoco) with it",
-        ));
-    }
+    cfg.world.validate()?;
     #[cfg(feature = "mujoco")]
     {
-        let mut out = out;
+        let mut out = cfg.clone();
         let model = user::load(path, cfg.servo.dt())?;
         out.plant.arm = user::arm_params(path, &model, cfg.plant.arm.torque_limit_nm)?;
         out.plant.tool_mass_kg = 0.0;
@@ -200,7 +194,30 @@ pub fn resolve(cfg: &SimConfig) -> Result<SimConfig, ConfigError> {
     #[cfg(not(feature = "mujoco"))]
     {
         let _ = path;
-        World::new(cfg, Vector2::zeros()).map(|_| out)
+        Err(without_mujoco())
+    }
+}
+
+/// The refusal of a MuJoCo world by an afs built without it.
+#[cfg(not(feature = "mujoco"))]
+fn without_mujoco() -> ConfigError {
+    ConfigError::rule(
+        "world.kind",
+        "is `mujoco` but this afs was built without MuJoCo; build it with `--features mujoco` \
+         after `python3 examples/python/mujoco_link.py` (README)",
+    )
+}
+
+/// MuJoCo's warnings so far in this process (0 without MuJoCo): counted, never printed from
+/// the fast loop nor written to MUJOCO_LOG.TXT; `afs experiment` reports them.
+pub fn mujoco_warnings() -> u64 {
+    #[cfg(feature = "mujoco")]
+    {
+        mujoco::warnings()
+    }
+    #[cfg(not(feature = "mujoco"))]
+    {
+        0
     }
 }
 
@@ -226,11 +243,7 @@ impl World {
             #[cfg(feature = "mujoco")]
             WorldKind::Mujoco => Ok(World::Mujoco(MujocoWorld::new(cfg, q)?)),
             #[cfg(not(feature = "mujoco"))]
-            WorldKind::Mujoco => Err(ConfigError::rule(
-                "world.kind",
-                "is `mujoco` but this afs was built without MuJoCo; build it with \
-                 `--features mujoco` after `python3 examples/python/mujoco_link.py` (README)",
-            )),
+            WorldKind::Mujoco => Err(without_mujoco()),
         }
     }
 

@@ -5,7 +5,7 @@
 
 use super::mjcf::{self, names};
 use super::{MUJOCO_STATE_LEN, MujocoState};
-use crate::arm::{Arm, ArmParams};
+use crate::arm::Arm;
 use crate::error::ConfigError;
 use crate::math::Vec2;
 use crate::plant::{PlantParams, PlantTruth, sensor_wrench};
@@ -26,6 +26,10 @@ const STATE_SPEC: u32 = mjtState::mjSTATE_TIME as u32
     | mjtState::mjSTATE_WARMSTART as u32
     | mjtState::mjSTATE_MOCAP_POS as u32
     | mjtState::mjSTATE_MOCAP_QUAT as u32;
+
+/// The sliding speed over which the applied Stribeck term changes sign (m/s): a smooth
+/// sign(v), so that the applied force does not chatter around v = 0.
+const SIGN_SMOOTHING_M_PER_S: f64 = 1e-4;
 
 /// The MuJoCo world.
 #[derive(Clone)]
@@ -97,7 +101,8 @@ fn id(model: &MjModel, kind: mjtObj, name: &str, what: &str) -> Result<usize, Co
 /// The generated model of `cfg`, its contact stiffness set to k_e (module docs of `mjcf`).
 fn generated_model(cfg: &SimConfig) -> Result<MjModel, ConfigError> {
     let probe = load(&mjcf::generate(cfg, None))?;
-    let tool = id(&probe, mjtObj::mjOBJ_BODY, "link2", "body")?;
+    let site = id(&probe, mjtObj::mjOBJ_SITE, names::TOOL_SITE, "site")?;
+    let tool = probe.site_bodyid()[site] as usize;
     let surface = id(&probe, mjtObj::mjOBJ_BODY, names::SURFACE_BODY, "body")?;
     let w = probe.body_invweight0()[tool][0] + probe.body_invweight0()[surface][0];
     let c = &cfg.plant.contact;
@@ -130,6 +135,17 @@ impl MujocoWorld {
         let mocap = usize::try_from(model.body_mocapid()[surface_body]).map_err(|_| {
             ConfigError::rule("world.mjcf", "the body `surface` must be a mocap body")
         })?;
+        let state = model.state_size(STATE_SPEC);
+        if state > MUJOCO_STATE_LEN {
+            return Err(ConfigError::rule(
+                "world.mjcf",
+                format!(
+                    "its resumable state has {state} values (time, joints, activations, warm \
+                     start, mocap poses); a world snapshot holds {MUJOCO_STATE_LEN}: drop the \
+                     activations or mocap bodies afs does not place"
+                ),
+            ));
+        }
         let qadr = joints.map(|j| model.jnt_qposadr()[j] as usize);
         let vadr = joints.map(|j| model.jnt_dofadr()[j] as usize);
         let mut world = Self {
@@ -226,17 +242,16 @@ impl MujocoWorld {
 
     /// One `mj_step` (the model's timestep is the servo period) under joint torques `tau`.
     pub fn step(&mut self, tau: Vector2<f64>) {
+        // The truth is the state the step started from, with the forces computed in it.
+        let (q, qd) = self.joints();
         let mut applied = tau;
         if self.applied_friction {
             self.applied_force = self.extra_friction_force();
-            let (q, _) = self.joints();
             applied += self.arm.jacobian(q).transpose() * self.applied_force;
         }
         for k in 0..2 {
             self.data.qfrc_applied_mut()[self.vadr[k]] = applied[k];
         }
-        // The truth is the state the step started from, with the forces computed in it.
-        let (q, qd) = self.joints();
         if matches!(self.surface.shape, Shape::Sinusoid { .. }) {
             self.place_surface(q);
         }
@@ -260,7 +275,7 @@ impl MujocoWorld {
         let v = t.sliding_velocity_m_per_s;
         let stribeck = law.stribeck_n
             * (-(v / law.stribeck_velocity_m_per_s).powi(2)).exp()
-            * (v / 1e-4).tanh();
+            * (v / SIGN_SMOOTHING_M_PER_S).tanh();
         let resist = stribeck + law.viscous_n_s_per_m * v;
         -crate::math::unit(t.tangent_angle_rad) * resist
     }
@@ -368,11 +383,6 @@ impl MujocoWorld {
         let (q, qd) = self.joints();
         self.truth = self.observe(q, qd, Vector2::zeros());
         Ok(())
-    }
-
-    /// The arm parameters the model was generated from.
-    pub fn arm_params(&self) -> ArmParams {
-        self.arm.params
     }
 }
 
