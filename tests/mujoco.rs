@@ -65,6 +65,25 @@ fn friction_coefficient_from_trials_on_mujoco() {
     }
 }
 
+/// §5.4's box in MuJoCo (fig. 5.9): rotated into the corner about the rotation centre its
+/// dithers estimate, every check passes; an arm model is refused for it (exit 2).
+#[test]
+fn the_box_finds_its_rotation_centre_on_mujoco() {
+    let out = experiments::fig5_9(&options(WorldKind::Mujoco, 10_000.0)).unwrap();
+    for c in &out.checks {
+        assert!(c.pass, "fig5.9 mujoco: {}", c.line());
+    }
+    let refused = afs()
+        .args(["experiment", "fig5.9", "--mjcf"])
+        .arg(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/examples/mujoco/user-arm.xml"
+        ))
+        .output()
+        .unwrap();
+    assert_refused(&refused, &"fig5.9 --mjcf", "§5.4's box has no arm");
+}
+
 /// `afs run --config examples/stack-mujoco.toml`: the servo steps MuJoCo, the supervisor's
 /// reference runs the same MuJoCo model in lockstep; the servo is killed mid-run and its
 /// successor resumes MuJoCo's state (warm start included), so every tick arrives once and

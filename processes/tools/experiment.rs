@@ -403,8 +403,8 @@ pub fn command(a: &ExperimentArgs, stop: &AtomicBool) -> Result<ExitCode> {
             && experiments::WORLD_FREE.contains(&a.name.as_str())
         {
             bail!(
-                "{} does not simulate the arm's world (eq. 4.5's curves, §5.4's box plant: \
-                 docs/mujoco.md); run it without --plant",
+                "{} simulates no world (eq. 4.5's curves: docs/mujoco.md); run it without \
+                 --plant",
                 a.name
             );
         }

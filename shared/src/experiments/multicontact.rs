@@ -6,6 +6,7 @@ use crate::error::ExperimentError;
 use crate::math::{Vec2, cross};
 use crate::multicontact::{BoxParams, BoxPlant, Pose, estimate_rotation_centre, friction_filter};
 use crate::sensor::{SensorModel, SensorParams, Wrench};
+use crate::world::BoxWorld;
 use serde::Serialize;
 
 /// One estimate of the rotation centre.
@@ -64,7 +65,7 @@ pub struct Fig59Summary {
 type WrenchSample = (f64, f64, Vec2, f64, Vec2);
 
 struct Rig {
-    plant: BoxPlant,
+    plant: BoxWorld,
     sensor: SensorModel,
     target: Pose,
     t: f64,
@@ -77,7 +78,7 @@ struct Rig {
 
 impl Rig {
     fn step(&mut self, target: Pose, target_vel: [f64; 3]) {
-        self.plant.step(target, target_vel, self.dt);
+        self.plant.step(target, target_vel);
         self.t += self.dt;
         while self.next_sample <= self.t {
             let tr = self.plant.truth();
@@ -141,7 +142,7 @@ pub fn fig5_9(opts: &Options) -> Result<Outcome<Fig59Summary>, ExperimentError> 
         ..opts.base.sensor
     };
     let mut rig = Rig {
-        plant: BoxPlant::new(params, touch),
+        plant: BoxWorld::new(&opts.base, params, touch, 1e-4)?,
         sensor: SensorModel::new(sensor_params, opts.seed),
         target: [touch[0] - 0.0006, touch[1] - 0.0006, tilt0],
         t: 0.0,

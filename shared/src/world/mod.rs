@@ -7,13 +7,19 @@
 //! come out. The rest of [`PlantTruth`] is the ideal observer's view that the checks and plots
 //! use; nothing in the controller reads it.
 
+mod boxes;
 pub mod mjcf;
 #[cfg(feature = "mujoco")]
 mod mujoco;
 #[cfg(feature = "mujoco")]
+mod mujoco_box;
+#[cfg(feature = "mujoco")]
 mod user;
+pub use boxes::BoxWorld;
 #[cfg(feature = "mujoco")]
 pub use mujoco::MujocoWorld;
+#[cfg(feature = "mujoco")]
+pub use mujoco_box::MujocoBox;
 
 use crate::arm::Arm;
 use crate::error::ConfigError;

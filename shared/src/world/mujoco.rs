@@ -70,12 +70,19 @@ pub fn warnings() -> u64 {
     WARNINGS.load(std::sync::atomic::Ordering::Relaxed)
 }
 
-fn count_warning(_: &mujoco_rs::prelude::MjLogMessage) {
-    WARNINGS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+fn count_warning(m: &mujoco_rs::prelude::MjLogMessage) {
+    if is_warning(m) {
+        WARNINGS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    }
+}
+
+/// A warning or an error; MuJoCo also logs information (each model's compile time).
+fn is_warning(m: &mujoco_rs::prelude::MjLogMessage) -> bool {
+    m.level() as i32 >= mujoco_rs::mujoco_c::mjtLogLevel::mjLOG_WARNING as i32
 }
 
 /// Routes MuJoCo's messages to [`count_warning`], once per process, before any model exists.
-fn install_log_handler() {
+pub(super) fn install_log_handler() {
     static ONCE: std::sync::Once = std::sync::Once::new();
     ONCE.call_once(|| {
         // SAFETY: every MuJoCo world is built through `MujocoWorld::new`, which calls this
@@ -84,7 +91,7 @@ fn install_log_handler() {
     });
 }
 
-fn load(xml: &str) -> Result<MjModel, ConfigError> {
+pub(super) fn load(xml: &str) -> Result<MjModel, ConfigError> {
     MjModel::from_xml_string(xml)
         .map_err(|e| ConfigError::rule("world (MuJoCo)", format!("the model did not load: {e}")))
 }
@@ -390,6 +397,17 @@ impl MujocoWorld {
 mod tests {
     use super::*;
     use crate::plant::holding_torque;
+
+    /// MuJoCo's information (a model's compile time) is not counted as a warning.
+    #[test]
+    fn only_warnings_and_errors_count() {
+        use mujoco_rs::mujoco_c::{mjtLogLevel as L, mjtLogTopic as T};
+        let message = |level| mujoco_rs::prelude::MjLogMessage::new(level, T::mjTOPIC_NONE, "x");
+        assert!(!is_warning(&message(L::mjLOG_INFO)));
+        assert!(!is_warning(&message(L::mjLOG_DEBUG)));
+        assert!(is_warning(&message(L::mjLOG_WARNING)));
+        assert!(is_warning(&message(L::mjLOG_ERROR)));
+    }
 
     fn pressed(cfg: &SimConfig) -> (MujocoWorld, Vector2<f64>) {
         let q = cfg.start_configuration().unwrap();
