@@ -15,6 +15,7 @@ pub mod faults;
 pub mod friction;
 pub mod hybrid;
 pub mod ident;
+pub mod insertion;
 pub mod join;
 pub mod live;
 pub mod math;
