@@ -302,6 +302,52 @@ fn rotation_centre_within_one_percent() {
     assert!(out.summary.estimates.len() >= 5);
 }
 
+/// Insertion at seed 1 (1.0 mm, −0.31° initial errors): the dither method inserts the peg
+/// 15 mm within the force limit; the same controller without the dither does not (its walk
+/// sticks and slips into the chamfer above the force limit): the check can fail.
+#[test]
+fn the_dither_method_inserts_where_its_baseline_does_not() {
+    use afs_shared::insertion::controller::Method;
+    let run = |method| {
+        let mut opts = Options::default();
+        opts.insertion.method = method;
+        experiments::insertion(&opts).unwrap()
+    };
+    let ok = run(Method::Dither);
+    // The insertion time is a target (the median's, over seeds), not a correctness check.
+    for c in ok.checks.iter().filter(|c| !c.is_target()) {
+        assert!(c.pass, "{}", c.line());
+    }
+    assert!(ok.summary.inserted && ok.summary.depth_mm >= 15.0);
+    let baseline = run(Method::NoDither);
+    let inserted = afs_shared::check::find(&baseline.checks, "inserted").unwrap();
+    assert!(!inserted.pass, "{}", inserted.line());
+}
+
+/// Bad insertion options are refused before anything runs, exit 2, naming the option.
+#[test]
+fn bad_insertion_options_are_refused_by_name() {
+    for (flag, value, needle) in [
+        ("--clearance", "0.7", "insertion.clearance"),
+        ("--clearance", "0", "insertion.clearance"),
+        ("--mu", "nan", "insertion.mu"),
+        ("--lateral-mm", "-9", "insertion.lateral_mm"),
+        ("--angle-deg", "inf", "insertion.angle_deg"),
+        ("--plant", "mujoco", "built-in plant only"),
+    ] {
+        let out = afs()
+            .args(["experiment", "insertion", flag, value])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{flag} {value}: {err}");
+        assert!(
+            err.contains(needle) && !err.contains("panicked"),
+            "{flag} {value}: {err}"
+        );
+    }
+}
+
 /// `afs experiment fig4.5 --seeds 1..6 --jobs 2 --json`: one report whose every check was run
 /// at the six seeds, with its pass rate and distribution (median ≤ p90 ≤ worst for an "at
 /// most" check), and the plot of the checks over the seeds; the same seeds one by one give the

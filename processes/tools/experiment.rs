@@ -206,8 +206,10 @@ impl fmt::Display for SweepReport {
         for c in &self.checks {
             writeln!(
                 f,
-                "  {:5.1} % pass  {} {} {}: median {:.4}, p90 {:.4}, worst {:.4} (seed {}){}",
+                "  {:5.1} % pass [{:.1}, {:.1}]  {} {} {}: median {:.4}, p90 {:.4}, worst {:.4} (seed {}){}",
                 100.0 * c.pass_rate,
+                100.0 * c.pass_rate_wilson_95[0],
+                100.0 * c.pass_rate_wilson_95[1],
                 c.name,
                 c.relation.symbol(),
                 c.limit,
@@ -372,6 +374,48 @@ pub struct ExperimentArgs {
     /// the dither and tuner settings follow it (docs/mujoco.md, *Rates*).
     #[arg(long)]
     pub rate_hz: Option<f64>,
+    /// insertion's own options.
+    #[command(flatten)]
+    pub insertion: InsertionArgs,
+}
+
+/// `afs experiment insertion`'s options (docs/insertion.md).
+#[derive(Debug, Clone, clap::Args)]
+pub struct InsertionArgs {
+    /// insertion: clearance ratio c = (D − d)/D.
+    #[arg(long, default_value_t = 0.002)]
+    pub clearance: f64,
+    /// insertion: friction coefficient μ at every contact.
+    #[arg(long, default_value_t = 0.3)]
+    pub mu: f64,
+    /// insertion: chamfer leg (mm); 0 for a sharp edge.
+    #[arg(long, default_value_t = 0.5)]
+    pub chamfer_mm: f64,
+    /// insertion: initial lateral error (mm); default uniform in ±2 mm per seed.
+    #[arg(long, allow_hyphen_values = true)]
+    pub lateral_mm: Option<f64>,
+    /// insertion: initial angle error (deg); default uniform in ±2° per seed.
+    #[arg(long, allow_hyphen_values = true)]
+    pub angle_deg: Option<f64>,
+    /// insertion: the controller.
+    #[arg(long, default_value = "dither", value_parser = ["dither", "no-dither", "search"])]
+    pub method: String,
+}
+
+impl InsertionArgs {
+    fn options(&self) -> experiments::InsertionOptions {
+        experiments::InsertionOptions {
+            clearance_ratio: self.clearance,
+            mu: self.mu,
+            chamfer_mm: self.chamfer_mm,
+            lateral_mm: self.lateral_mm,
+            angle_deg: self.angle_deg,
+            // The parser allows only the three names.
+            method: afs_shared::insertion::controller::Method::parse(&self.method)
+                .unwrap_or_default(),
+            ..Default::default()
+        }
+    }
 }
 
 /// The registry's names, `all` and `list`, for `afs experiment --help` and the parser.
@@ -423,6 +467,7 @@ pub fn command(a: &ExperimentArgs, stop: &AtomicBool) -> Result<ExitCode> {
         thesis_table: a.thesis_table,
         base,
         rig,
+        insertion: a.insertion.options(),
     };
     // The thesis's rig is defined for the friction experiments only.
     let names: Vec<&str> = match a.name.as_str() {
@@ -431,7 +476,8 @@ pub fn command(a: &ExperimentArgs, stop: &AtomicBool) -> Result<ExitCode> {
             .filter(|e| rig == Rig::Afs || e.friction)
             .filter(|e| {
                 opts.base.world.kind == afs_shared::world::WorldKind::Builtin
-                    || !experiments::WORLD_FREE.contains(&e.name)
+                    || !(experiments::WORLD_FREE.contains(&e.name)
+                        || experiments::BUILTIN_ONLY.contains(&e.name))
             })
             .map(|e| e.name)
             .collect(),

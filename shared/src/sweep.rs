@@ -26,6 +26,9 @@ pub struct CheckSweep {
     pub passes: usize,
     /// passes / runs.
     pub pass_rate: f64,
+    /// The Wilson score 95 % interval of the pass rate ([`wilson_95`]).
+    #[serde(default)]
+    pub pass_rate_wilson_95: [f64; 2],
     /// Seeds whose figure was not a finite number (counted as failures, left out of the
     /// quantiles).
     pub non_finite: usize,
@@ -43,6 +46,20 @@ pub struct CheckSweep {
     pub worst_seed: u64,
     /// The seeds where it failed.
     pub failed_seeds: Vec<u64>,
+}
+
+/// The Wilson score interval at 95 % (z = 1.96) of a rate of `k` successes in `n` trials:
+/// `(p̂ + z²/2n ± z √(p̂(1 − p̂)/n + z²/4n²)) / (1 + z²/n)`. [0, 1] for no trials.
+pub fn wilson_95(k: usize, n: usize) -> [f64; 2] {
+    if n == 0 {
+        return [0.0, 1.0];
+    }
+    let (z, n) = (1.96f64, n as f64);
+    let p = k as f64 / n;
+    let z2 = z * z;
+    let centre = (p + z2 / (2.0 * n)) / (1.0 + z2 / n);
+    let half = z / (1.0 + z2 / n) * (p * (1.0 - p) / n + z2 / (4.0 * n * n)).sqrt();
+    [(centre - half).max(0.0), (centre + half).min(1.0)]
 }
 
 /// The value at fraction `q` of sorted finite values, by linear interpolation between ranks
@@ -87,6 +104,7 @@ pub fn summarize(runs: &[(u64, Vec<Check>)]) -> Vec<CheckSweep> {
                 runs: 0,
                 passes: 0,
                 pass_rate: 0.0,
+                pass_rate_wilson_95: [0.0, 1.0],
                 non_finite: 0,
                 median: f64::NAN,
                 p90: f64::NAN,
@@ -127,6 +145,7 @@ pub fn summarize(runs: &[(u64, Vec<Check>)]) -> Vec<CheckSweep> {
             } else {
                 0.0
             };
+            s.pass_rate_wilson_95 = wilson_95(s.passes, s.runs);
             s.median = quantile(&values, 0.5);
             s.p90 = quantile(
                 &values,
@@ -192,6 +211,20 @@ mod tests {
         assert_eq!(quantile(&v, 1.0), 5.0);
         assert_eq!(quantile(&[7.0], 0.9), 7.0);
         assert!(quantile(&[], 0.5).is_nan());
+    }
+
+    /// Wilson's interval against its closed form at 495 of 500 and the textbook 0 of 10
+    /// (upper bound 0.2775).
+    #[test]
+    fn wilson_interval_matches_its_closed_form() {
+        let [lo, hi] = wilson_95(495, 500);
+        assert!(
+            (lo - 0.976_80).abs() < 1e-4 && (hi - 0.995_72).abs() < 1e-4,
+            "{lo} {hi}"
+        );
+        let [lo, hi] = wilson_95(0, 10);
+        assert!(lo == 0.0 && (hi - 0.2775).abs() < 1e-4, "{hi}");
+        assert_eq!(wilson_95(0, 0), [0.0, 1.0]);
     }
 
     /// Ten seeds of an "at most 1" check and an "at least 2" one: pass rates, worst in the

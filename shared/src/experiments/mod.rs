@@ -10,6 +10,7 @@
 
 mod curves;
 mod identification;
+mod insertion;
 mod multicontact;
 mod recursive;
 mod suppression;
@@ -18,6 +19,7 @@ mod tuning;
 
 pub use curves::*;
 pub use identification::*;
+pub use insertion::*;
 pub use multicontact::*;
 pub use recursive::*;
 pub use suppression::*;
@@ -41,6 +43,8 @@ pub struct Options {
     pub thesis_table: bool,
     /// The rig `base` was set up as (already applied to `base`; kept for reports).
     pub rig: crate::setups::Rig,
+    /// `insertion` only: the fit, the initial errors and the controller.
+    pub insertion: InsertionOptions,
 }
 
 impl Default for Options {
@@ -50,6 +54,7 @@ impl Default for Options {
             base: SimConfig::default(),
             thesis_table: false,
             rig: crate::setups::Rig::Afs,
+            insertion: InsertionOptions::default(),
         }
     }
 }
@@ -125,11 +130,15 @@ registry! {
     "fig5.6", "fig. 5.6", false, fig5_6, "tracking an unknown sinusoidal surface";
     "corners", "§5.2, §7.2", false, corners, "tracking a piecewise-linear surface through its corners";
     "fig5.9", "figs. 5.9, 5.10", false, fig5_9, "a box rotated into a corner about its estimated rotation centre";
+    "insertion", "§5.4 (later study)", false, insertion, "a peg into a hole from initial errors: dither, no-dither or search";
 }
 
 /// Experiments that simulate no world (eq. 4.5's curves): they run the same on either, so
 /// `--plant mujoco` is refused for them.
 pub const WORLD_FREE: &[&str] = &["fig4.1", "fig4.2", "fig4.3", "fig4.4"];
+
+/// Experiments that run on the built-in plant only (`all --plant mujoco` leaves them out).
+pub const BUILTIN_ONLY: &[&str] = &["insertion"];
 
 /// The experiment named `name`.
 pub fn find(name: &str) -> Option<&'static Experiment> {

@@ -1,0 +1,320 @@
+//! Force-guided insertion (docs/insertion.md): a peg under a compliant wrist into a hole, from
+//! initial errors drawn per seed, by one of three controllers; success, time, peak force,
+//! jams and wedges.
+
+use super::*;
+use crate::error::ConfigError;
+use crate::insertion::controller::{Controller, ControllerParams, Input, Method, Phase};
+use crate::insertion::plant::{ContactState, PegParams, PegPlant};
+use crate::insertion::whitney::Fit;
+use crate::sensor::{SensorModel, SensorParams, Wrench};
+use rand_chacha::ChaCha8Rng;
+use rand_chacha::rand_core::SeedableRng;
+use rand_distr::{Distribution, Uniform};
+use serde::Serialize;
+
+/// The insertion experiment's own settings (`afs experiment insertion --clearance ...`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct InsertionOptions {
+    /// Clearance ratio c = (D − d)/D.
+    pub clearance_ratio: f64,
+    /// Friction coefficient μ at every contact.
+    pub mu: f64,
+    /// Chamfer leg (mm); 0: none.
+    pub chamfer_mm: f64,
+    /// Initial lateral error (mm); None: uniform in ±2 mm per seed.
+    pub lateral_mm: Option<f64>,
+    /// Initial angle error (deg); None: uniform in ±2° per seed.
+    pub angle_deg: Option<f64>,
+    /// The controller.
+    pub method: Method,
+    /// Time allowed (s).
+    pub time_limit_s: f64,
+    /// The force limit, as a multiple of the commanded insertion force.
+    pub force_limit_factor: f64,
+}
+
+impl Default for InsertionOptions {
+    fn default() -> Self {
+        Self {
+            clearance_ratio: 0.002,
+            mu: 0.3,
+            chamfer_mm: 0.5,
+            lateral_mm: None,
+            angle_deg: None,
+            method: Method::Dither,
+            time_limit_s: 10.0,
+            force_limit_factor: 3.0,
+        }
+    }
+}
+
+impl InsertionOptions {
+    /// Checks the settings.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let rules = [
+            ("insertion.clearance", self.clearance_ratio, 0.0..0.5),
+            ("insertion.mu", self.mu, 0.0..2.0),
+            ("insertion.chamfer_mm", self.chamfer_mm, 0.0..3.0),
+            ("insertion.time_limit_s", self.time_limit_s, 0.0..600.0),
+        ];
+        for (name, v, range) in rules {
+            // A chamfer may be 0 (a sharp edge); a clearance, a friction or a time may not.
+            let start_ok = v == range.start && name.contains("chamfer");
+            if !(v.is_finite() && (range.contains(&v) && v > range.start || start_ok)) {
+                return Err(ConfigError::rule(
+                    name,
+                    format!(
+                        "is {v}; it must be in ({}, {}){}",
+                        range.start,
+                        range.end,
+                        if name.contains("chamfer") {
+                            " or 0"
+                        } else {
+                            ""
+                        }
+                    ),
+                ));
+            }
+        }
+        for (name, v, limit) in [
+            ("insertion.lateral_mm", self.lateral_mm, 4.0),
+            ("insertion.angle_deg", self.angle_deg, 10.0),
+        ] {
+            if let Some(v) = v
+                && !(v.is_finite() && v.abs() <= limit)
+            {
+                return Err(ConfigError::rule(
+                    name,
+                    format!("is {v}; it must be within ±{limit}"),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Summary of one insertion.
+#[derive(Debug, Clone, Serialize)]
+pub struct InsertionSummary {
+    /// The controller.
+    pub method: &'static str,
+    /// Clearance ratio, μ, chamfer (mm).
+    pub clearance_ratio: f64,
+    /// μ.
+    pub mu: f64,
+    /// Chamfer (mm).
+    pub chamfer_mm: f64,
+    /// Initial lateral error (mm) and angle error (deg).
+    pub lateral_error_mm: f64,
+    /// Initial angle error (deg).
+    pub angle_error_deg: f64,
+    /// Whitney's wedging angle for the fit (deg).
+    pub wedging_angle_deg: f64,
+    /// Depth reached within the time limit without exceeding the force limit.
+    pub inserted: bool,
+    /// Time from the first contact to the depth (s), if reached.
+    pub insertion_time_s: Option<f64>,
+    /// Largest contact force (N).
+    pub peak_force_n: f64,
+    /// Largest depth (mm).
+    pub depth_mm: f64,
+    /// Ticks spent jammed and wedged (true state).
+    pub jammed_ticks: u64,
+    /// Ticks spent wedged.
+    pub wedged_ticks: u64,
+    /// Time each phase began (s): find, align, insert, done.
+    pub phase_starts_s: [Option<f64>; 4],
+}
+
+/// The initial errors of `seed` (uniform ±2 mm, ±2°) unless set.
+fn initial_errors(o: &InsertionOptions, seed: u64) -> (f64, f64) {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x1a5e_7100);
+    let u = Uniform::new_inclusive(-1.0f64, 1.0).expect("valid range");
+    let (a, b) = (u.sample(&mut rng), u.sample(&mut rng));
+    (
+        o.lateral_mm.unwrap_or(2.0 * a) * 1e-3,
+        o.angle_deg.unwrap_or(2.0 * b).to_radians(),
+    )
+}
+
+/// One insertion on the built-in plant (docs/insertion.md): the peg starts 1 mm above the
+/// face, offset and tilted by the seed's errors, and the controller inserts it 15 mm.
+pub fn insertion(opts: &Options) -> Result<Outcome<InsertionSummary>, ExperimentError> {
+    let o = opts.insertion;
+    o.validate()?;
+    if opts.base.world.kind != crate::world::WorldKind::Builtin {
+        return Err(ConfigError::rule(
+            "world.kind",
+            "is `mujoco`; insertion runs on the built-in plant only: the wrist is not in MuJoCo's generated \
+             model yet (docs/insertion.md); run it without --plant",
+        )
+        .into());
+    }
+    let mut params = PegParams::default();
+    params.geometry.clearance_ratio = o.clearance_ratio;
+    params.geometry.chamfer_m = o.chamfer_mm * 1e-3;
+    params.friction = params.friction.scaled(o.mu / params.mu());
+    let g = params.geometry;
+    let fit = Fit {
+        peg_width_m: g.peg_width_m,
+        clearance_ratio: g.clearance_ratio,
+        friction: o.mu,
+    };
+    let (lateral, angle) = initial_errors(&o, opts.seed);
+    let start = [lateral, 1e-3, angle];
+    let mut plant = PegPlant::new(params, start);
+    let sensor_params = SensorParams {
+        noise_force_n: 0.02,
+        ..opts.base.sensor
+    };
+    let mut sensor = SensorModel::new(sensor_params, opts.seed);
+    let tare = crate::sim::tare(&mut sensor);
+    let cp = ControllerParams::default();
+    let chamfer_depth = g.chamfer_m / g.chamfer_angle_deg.to_radians().tan().max(1e-9);
+    let mut ctl = Controller::new(cp, o.method, params.wrist_stiffness, start, chamfer_depth);
+    let dt = 1e-4;
+    let limit = o.force_limit_factor * cp.insertion_force_n;
+    let (mut peak, mut depth, mut jammed, mut wedged) = (0.0f64, 0.0f64, 0u64, 0u64);
+    let mut starts = [None; 4];
+    let mut trace = Vec::new();
+    let (mut reading, mut next_sample, period) =
+        (Wrench::default(), 0.0, 1.0 / sensor_params.rate_hz);
+    let mut t = 0.0;
+    let mut contact_t = None;
+    while t < o.time_limit_s {
+        let truth = *plant.truth();
+        while next_sample <= t {
+            reading = sensor
+                .sample(Wrench {
+                    force: truth.force,
+                    torque: truth.moment_about_tip,
+                })
+                .wrench;
+            next_sample += period;
+        }
+        let inp = Input {
+            force: [
+                reading.force.x - tare.force.x,
+                reading.force.y - tare.force.y,
+            ],
+            moment_nm: reading.torque - tare.torque,
+            tip: truth.pose,
+        };
+        let before = ctl.phase();
+        let (target, rate) = ctl.step(&inp, dt);
+        if ctl.phase() != before {
+            let k = match ctl.phase() {
+                Phase::Find => 0,
+                Phase::Align => 1,
+                Phase::Insert => 2,
+                _ => 3,
+            };
+            starts[k] = Some(t);
+            if k == 0 {
+                contact_t = Some(t);
+            }
+        }
+        plant.step(target, rate, dt);
+        t += dt;
+        let tr = plant.truth();
+        peak = peak.max(tr.force.norm());
+        depth = depth.max(tr.depth_m);
+        match tr.state {
+            ContactState::Jammed => jammed += 1,
+            ContactState::Wedged => wedged += 1,
+            _ => {}
+        }
+        if ((t / dt).round() as u64).is_multiple_of(50) {
+            trace.push([
+                t,
+                tr.depth_m * 1e3,
+                tr.force.x,
+                tr.force.y,
+                tr.pose[2].to_degrees(),
+            ]);
+        }
+        if ctl.phase() == Phase::Done || peak > limit {
+            break;
+        }
+    }
+    let inserted = ctl.phase() == Phase::Done && peak <= limit;
+    let time = match (inserted, contact_t, starts[3]) {
+        (true, Some(a), Some(b)) => Some(b - a),
+        _ => None,
+    };
+    let checks = vec![
+        Check::at_least(
+            "inserted",
+            "depth reached in time, force in limit (1 = yes)",
+            f64::from(u8::from(inserted)),
+            1.0,
+        ),
+        Check::at_most(
+            "peak_force_over_insertion_force",
+            "largest contact force / insertion force",
+            peak / cp.insertion_force_n,
+            o.force_limit_factor,
+        ),
+        Check::at_most(
+            "insertion_time_s",
+            "time from contact to depth (s)",
+            time.unwrap_or(f64::INFINITY),
+            5.0,
+        )
+        .target(),
+    ];
+    let figure = insertion_figure(&trace);
+    Ok(Outcome {
+        simulated_s: t,
+        summary: InsertionSummary {
+            method: o.method.name(),
+            clearance_ratio: o.clearance_ratio,
+            mu: o.mu,
+            chamfer_mm: o.chamfer_mm,
+            lateral_error_mm: lateral * 1e3,
+            angle_error_deg: angle.to_degrees(),
+            wedging_angle_deg: fit.wedging_angle_rad().to_degrees(),
+            inserted,
+            insertion_time_s: time,
+            peak_force_n: peak,
+            depth_mm: depth * 1e3,
+            jammed_ticks: jammed,
+            wedged_ticks: wedged,
+            phase_starts_s: starts,
+        },
+        checks,
+        figure,
+    })
+}
+
+/// Depth, contact force and tilt over time.
+fn insertion_figure(trace: &[[f64; 5]]) -> Figure {
+    let series = |label: &str, k: usize| Series {
+        label: label.into(),
+        points: trace.iter().map(|r| [r[0], r[k]]).collect(),
+        markers: false,
+    };
+    Figure {
+        title: "Insertion: depth, contact force and tilt".into(),
+        x_label: "time (s)".into(),
+        log_x: false,
+        panels: vec![
+            Panel {
+                x_label: None,
+                y_label: "depth (mm)".into(),
+                series: vec![series("depth", 1)],
+            },
+            Panel {
+                x_label: None,
+                y_label: "contact force (N)".into(),
+                series: vec![series("F_x", 2), series("F_y", 3)],
+            },
+            Panel {
+                x_label: None,
+                y_label: "tilt (deg)".into(),
+                series: vec![series("θ", 4)],
+            },
+        ],
+    }
+}

@@ -1,0 +1,446 @@
+//! The insertion controller (docs/insertion.md, *The controller*): a hybrid force/position
+//! controller on the wrist's commanded pose, one call per servo tick, no allocation.
+//!
+//! Methods:
+//! * `dither` (afs): approach; press with force control along the hole's axis; comply in θ
+//!   (the moment about the tip nulled) and in x (the lateral force nulled), and walk x towards
+//!   the side of the tip that the part does not support (the centre of pressure of the contact
+//!   force, from the wrist's force/torque sensor, is on the supported side); in the hole, the
+//!   same loops keep the wrench at the centre of Whitney's parallelogram (F_x = 0, M = 0) while
+//!   the insertion force pushes, and a dither along the axis suppresses the friction.
+//! * `no-dither`: the same without the dither.
+//! * `search`: the industrial force-control packages' search: a constant insertion force, a
+//!   lateral sweep of growing amplitude about the start, passive compliance only (the wrist's),
+//!   no estimation.
+
+use serde::{Deserialize, Serialize};
+
+/// Which controller.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    /// Hybrid force/moment control, centre-of-pressure search, dither.
+    #[default]
+    Dither,
+    /// The same without the dither.
+    NoDither,
+    /// Constant force and a lateral sweep, passive compliance.
+    Search,
+}
+
+impl Method {
+    /// Its command-line name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Dither => "dither",
+            Method::NoDither => "no-dither",
+            Method::Search => "search",
+        }
+    }
+
+    /// From its command-line name.
+    pub fn parse(s: &str) -> Option<Self> {
+        [Method::Dither, Method::NoDither, Method::Search]
+            .into_iter()
+            .find(|m| m.name() == s)
+    }
+}
+
+/// The controller's phase.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Phase {
+    /// Moving down to the part.
+    #[default]
+    Approach,
+    /// Pressing on the part, finding the hole.
+    Find,
+    /// In the hole, held lightly while the moment and lateral loops align the peg with it.
+    Align,
+    /// In the hole, going in.
+    Insert,
+    /// At depth.
+    Done,
+}
+
+/// Settings.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ControllerParams {
+    /// Approach speed (m/s).
+    pub approach_m_per_s: f64,
+    /// Contact force that ends the approach (N).
+    pub contact_n: f64,
+    /// Contact force below which the peg has lost its support (N), for at least (s).
+    pub contact_lost_n: f64,
+    /// How long the force must stay below `contact_lost_n` (s).
+    pub contact_lost_s: f64,
+    /// Force along the axis while finding the hole (N): light, so friction does not hold the
+    /// walk.
+    pub find_force_n: f64,
+    /// Centre of pressure closer to the tip's centre than this: no side to walk to (m).
+    pub centred_m: f64,
+    /// Force along the axis while aligning in the hole (N).
+    pub align_force_n: f64,
+    /// Normalised moment |M|/(r F_y) below which the peg counts as aligned.
+    pub aligned_moment: f64,
+    /// For how long (s).
+    pub aligned_s: f64,
+    /// Longest alignment (s).
+    pub align_timeout_s: f64,
+    /// Peg width d, for the normalised moment (m).
+    pub peg_width_m: f64,
+    /// Insertion force F_z (N).
+    pub insertion_force_n: f64,
+    /// Force loop bandwidth along the axis (Hz).
+    pub force_bandwidth_hz: f64,
+    /// Lateral force loop bandwidth (Hz).
+    pub lateral_bandwidth_hz: f64,
+    /// Moment loop bandwidth (Hz).
+    pub moment_bandwidth_hz: f64,
+    /// Largest speed of the commanded pose along the axis and across it (m/s): an impact at v
+    /// on the part's contact stiffness k_c is a force of about v √(k_c m).
+    pub max_speed_m_per_s: f64,
+    /// Largest rate of the commanded tilt (rad/s).
+    pub max_tilt_rate_rad_per_s: f64,
+    /// Lateral walk speed towards the unsupported side at full offset (m/s).
+    pub walk_m_per_s: f64,
+    /// Depth past which the peg is in the hole (m below the face; the chamfer's depth is added).
+    pub in_hole_m: f64,
+    /// Depth at which the insertion is done (m).
+    pub target_depth_m: f64,
+    /// Dither amplitude along the axis (m) and frequency (Hz).
+    pub dither_m: f64,
+    /// Dither frequency (Hz).
+    pub dither_hz: f64,
+    /// Search: sweep frequency (Hz), amplitude growth (m/s) and largest amplitude (m).
+    pub search_hz: f64,
+    /// Search amplitude growth (m/s).
+    pub search_growth_m_per_s: f64,
+    /// Search's largest amplitude (m).
+    pub search_max_m: f64,
+}
+
+impl Default for ControllerParams {
+    fn default() -> Self {
+        Self {
+            approach_m_per_s: 0.002,
+            contact_n: 0.5,
+            contact_lost_n: 0.2,
+            contact_lost_s: 2e-3,
+            find_force_n: 2.0,
+            centred_m: 0.3e-3,
+            align_force_n: 1.0,
+            aligned_moment: 0.1,
+            aligned_s: 0.1,
+            align_timeout_s: 1.5,
+            peg_width_m: 0.01,
+            insertion_force_n: 5.0,
+            force_bandwidth_hz: 5.0,
+            lateral_bandwidth_hz: 3.0,
+            moment_bandwidth_hz: 3.0,
+            max_speed_m_per_s: 0.005,
+            max_tilt_rate_rad_per_s: 0.05,
+            walk_m_per_s: 0.002,
+            in_hole_m: 0.5e-3,
+            target_depth_m: 0.015,
+            dither_m: 0.1e-3,
+            dither_hz: 20.0,
+            search_hz: 0.3,
+            search_growth_m_per_s: 1e-3,
+            search_max_m: 3e-3,
+        }
+    }
+}
+
+/// What the controller reads each tick: the wrist's force/torque sensor (contact force on the
+/// peg, N, and its moment about the tip, N·m, world frame) and the tip's measured pose.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Input {
+    /// Force (N).
+    pub force: [f64; 2],
+    /// Moment about the tip (N·m).
+    pub moment_nm: f64,
+    /// Tip pose (m, m, rad).
+    pub tip: [f64; 3],
+}
+
+/// The controller.
+#[derive(Debug, Clone)]
+pub struct Controller {
+    params: ControllerParams,
+    method: Method,
+    /// Stiffness of the wrist (k_x, k_y, k_θ): the loops' gains are bandwidth / stiffness.
+    wrist: [f64; 3],
+    /// The part's face height, known to the robot (m), and the depth at which the peg is in
+    /// the hole.
+    face_y: f64,
+    in_hole_depth_m: f64,
+    phase: Phase,
+    target: [f64; 3],
+    start_x: f64,
+    t: f64,
+    phase_t: f64,
+    /// How long the peg has stayed aligned (s).
+    aligned_s: f64,
+    /// How long the contact force has been below `contact_lost_n` (s).
+    lost_s: f64,
+}
+
+impl Controller {
+    /// A controller starting from the commanded tip pose `start`, for a wrist of stiffness
+    /// `wrist` and a chamfer `chamfer_depth_m` deep.
+    pub fn new(
+        params: ControllerParams,
+        method: Method,
+        wrist: [f64; 3],
+        start: [f64; 3],
+        chamfer_depth_m: f64,
+    ) -> Self {
+        Self {
+            params,
+            method,
+            wrist,
+            face_y: 0.0,
+            in_hole_depth_m: params.in_hole_m + chamfer_depth_m,
+            phase: Phase::Approach,
+            target: start,
+            start_x: start[0],
+            t: 0.0,
+            phase_t: 0.0,
+            lost_s: 0.0,
+            aligned_s: 0.0,
+        }
+    }
+
+    /// The phase.
+    pub fn phase(&self) -> Phase {
+        self.phase
+    }
+
+    /// Depth of the tip below the face (m).
+    pub fn depth_m(&self, tip_y: f64) -> f64 {
+        self.face_y - tip_y
+    }
+
+    /// One tick of `dt`: the wrist's commanded pose and rate.
+    pub fn step(&mut self, inp: &Input, dt: f64) -> ([f64; 3], [f64; 3]) {
+        self.t += dt;
+        self.phase_t += dt;
+        let p = self.params;
+        let tau = std::f64::consts::TAU;
+        let mut rate = [0.0; 3];
+        match self.phase {
+            Phase::Approach => {
+                rate[1] = -p.approach_m_per_s;
+                if inp.force[0].hypot(inp.force[1]) > p.contact_n {
+                    // The wrist's lead on the peg would press on: start the force loop from
+                    // where the peg is.
+                    self.target[1] = inp.tip[1];
+                    self.next(Phase::Find);
+                }
+            }
+            Phase::Find | Phase::Align | Phase::Insert => {
+                let find = self.phase == Phase::Find;
+                let search = self.method == Method::Search;
+                let force = match self.phase {
+                    Phase::Find => p.find_force_n,
+                    Phase::Align => p.align_force_n,
+                    _ => p.insertion_force_n,
+                };
+                rate[1] = -tau * p.force_bandwidth_hz / self.wrist[1] * (force - inp.force[1]);
+                if inp.force[0].hypot(inp.force[1]) < p.contact_lost_n {
+                    self.lost_s += dt;
+                } else {
+                    self.lost_s = 0.0;
+                }
+                let lost = self.lost_s >= p.contact_lost_s;
+                if lost {
+                    // Guarded descent: the wrist's lead on a peg that lost its support would
+                    // fling it into the next contact; take the lead off once, where the loss
+                    // is found, and go on down at the approach speed.
+                    if self.lost_s - dt < p.contact_lost_s {
+                        self.target[0] = inp.tip[0];
+                        self.target[1] = inp.tip[1];
+                    }
+                    rate[1] = if self.phase == Phase::Insert {
+                        -p.max_speed_m_per_s
+                    } else {
+                        -p.approach_m_per_s
+                    };
+                } else if !search {
+                    if find {
+                        rate[0] = self.find_rate(inp);
+                    } else {
+                        rate[0] = tau * p.lateral_bandwidth_hz / self.wrist[0] * inp.force[0];
+                        rate[2] = tau * p.moment_bandwidth_hz / self.wrist[2] * inp.moment_nm;
+                    }
+                }
+                let depth = self.depth_m(inp.tip[1]);
+                if find && depth > self.in_hole_depth_m {
+                    self.next(if search { Phase::Insert } else { Phase::Align });
+                }
+                if self.phase == Phase::Align && self.aligned(inp, dt) {
+                    self.next(Phase::Insert);
+                }
+                if depth >= p.target_depth_m {
+                    self.next(Phase::Done);
+                }
+            }
+            Phase::Done => {}
+        }
+        let v = p.max_speed_m_per_s;
+        rate[0] = rate[0].clamp(-v, v);
+        rate[1] = rate[1].clamp(-v, v);
+        rate[2] = rate[2].clamp(-p.max_tilt_rate_rad_per_s, p.max_tilt_rate_rad_per_s);
+        for (t, r) in self.target.iter_mut().zip(rate) {
+            *t += r * dt;
+        }
+        let mut out = self.target;
+        if self.method == Method::Dither
+            && matches!(self.phase, Phase::Find | Phase::Align | Phase::Insert)
+        {
+            // Along the motion the friction resists: across the face while finding, along the
+            // axis while inserting (thesis ch. 4: Aω above the nominal speed).
+            let w = tau * p.dither_hz;
+            let k = usize::from(self.phase != Phase::Find);
+            out[k] += p.dither_m * (w * self.phase_t).sin();
+            rate[k] += p.dither_m * w * (w * self.phase_t).cos();
+        }
+        if self.method == Method::Search && self.phase != Phase::Approach {
+            let a = (p.search_growth_m_per_s * self.phase_t).min(p.search_max_m);
+            out[0] = self.start_x + a * (tau * p.search_hz * self.t).sin();
+        }
+        (out, rate)
+    }
+
+    /// In the find phase: the walk towards the unsupported side. The contact's centre of
+    /// pressure on the tip face is x_c = M/F_y from the tip; the part supports the tip there,
+    /// so the hole is on the other side.
+    fn find_rate(&self, inp: &Input) -> f64 {
+        let p = &self.params;
+        if inp.force[1] < 0.5 * p.find_force_n {
+            return 0.0;
+        }
+        let x_c = inp.moment_nm / inp.force[1];
+        if x_c.abs() < p.centred_m {
+            return 0.0;
+        }
+        -p.walk_m_per_s * x_c.signum()
+    }
+
+    /// In the align phase: true once the moment about the tip has stayed below
+    /// `aligned_moment` × r F_y (a tenth of Whitney's two-point side at λ = 1) for
+    /// `aligned_s`, or after `align_timeout_s`.
+    fn aligned(&mut self, inp: &Input, dt: f64) -> bool {
+        let p = &self.params;
+        let scale = 0.5 * p.peg_width_m * inp.force[1].abs().max(p.contact_lost_n);
+        if inp.moment_nm.abs() < p.aligned_moment * scale {
+            self.aligned_s += dt;
+        } else {
+            self.aligned_s = 0.0;
+        }
+        self.aligned_s >= p.aligned_s || self.phase_t >= p.align_timeout_s
+    }
+
+    fn next(&mut self, phase: Phase) {
+        self.phase = phase;
+        self.phase_t = 0.0;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const WRIST: [f64; 3] = [2e3, 2e3, 5.0];
+
+    fn at(force: [f64; 2], moment_nm: f64, tip: [f64; 3]) -> Input {
+        Input {
+            force,
+            moment_nm,
+            tip,
+        }
+    }
+
+    fn started(method: Method) -> Controller {
+        let mut c = Controller::new(
+            ControllerParams::default(),
+            method,
+            WRIST,
+            [0.0, 1e-3, 0.0],
+            0.5e-3,
+        );
+        // Contact: the approach ends where the peg is, without the wrist's lead.
+        let (target, _) = c.step(&at([0.0, 0.6], 0.0, [0.0, -1e-5, 0.0]), 1e-4);
+        assert_eq!(c.phase(), Phase::Find);
+        assert!((target[1] + 1e-5).abs() < 1e-6, "{target:?}");
+        c
+    }
+
+    #[test]
+    fn methods_parse_by_name() {
+        for m in [Method::Dither, Method::NoDither, Method::Search] {
+            assert_eq!(Method::parse(m.name()), Some(m));
+        }
+        assert_eq!(Method::parse("spiral"), None);
+    }
+
+    /// Pressed on the part with the centre of pressure 3 mm to the right of the tip, the peg
+    /// walks left (towards the unsupported side), at the walk speed; 3 mm to the left, right.
+    #[test]
+    fn the_walk_goes_away_from_the_support() {
+        for (x_c, sign) in [(3e-3, -1.0), (-3e-3, 1.0)] {
+            let mut c = started(Method::NoDither);
+            let f = 2.0;
+            let before = c.target;
+            c.step(&at([0.0, f], x_c * f, [0.0, -1e-5, 0.0]), 1e-3);
+            let moved = c.target[0] - before[0];
+            let want = sign * ControllerParams::default().walk_m_per_s * 1e-3;
+            assert!((moved - want).abs() < 1e-12, "{x_c}: {moved} vs {want}");
+        }
+    }
+
+    /// Contact lost for longer than `contact_lost_s`: the lead comes off once (the commanded
+    /// pose jumps to the peg), then the commanded pose goes down at the approach speed.
+    #[test]
+    fn a_lost_contact_takes_the_lead_off_once() {
+        let mut c = started(Method::Dither);
+        let p = ControllerParams::default();
+        c.target = [1e-3, -2e-3, 0.0];
+        let tip = [0.0, -0.4e-3, 0.0];
+        let dt = 1e-4;
+        let ticks = (p.contact_lost_s / dt).round() as usize;
+        for _ in 0..ticks - 1 {
+            c.step(&at([0.0, 0.0], 0.0, tip), dt);
+        }
+        assert!(c.target[1] < -1e-3, "not yet: {:?}", c.target);
+        c.step(&at([0.0, 0.0], 0.0, tip), dt);
+        assert!((c.target[0] - tip[0]).abs() < 1e-12);
+        assert!(
+            (c.target[1] - (tip[1] - p.approach_m_per_s * dt)).abs() < 1e-12,
+            "{:?}",
+            c.target
+        );
+        c.step(&at([0.0, 0.0], 0.0, tip), dt);
+        assert!((c.target[1] - (tip[1] - 2.0 * p.approach_m_per_s * dt)).abs() < 1e-12);
+    }
+
+    /// Past the chamfer the peg is in the hole: the dither method aligns before it inserts,
+    /// the search goes straight in.
+    #[test]
+    fn in_the_hole_dither_aligns_and_search_inserts() {
+        let deep = [0.0, -1.2e-3, 0.0];
+        let mut c = started(Method::Dither);
+        c.step(&at([0.0, 2.0], 0.0, deep), 1e-4);
+        assert_eq!(c.phase(), Phase::Align);
+        // Aligned: a moment below a tenth of r F_y for 0.1 s.
+        for _ in 0..1001 {
+            c.step(&at([0.0, 1.0], 1e-4, deep), 1e-4);
+        }
+        assert_eq!(c.phase(), Phase::Insert);
+        let mut s = started(Method::Search);
+        s.step(&at([0.0, 2.0], 0.0, deep), 1e-4);
+        assert_eq!(s.phase(), Phase::Insert);
+    }
+}
