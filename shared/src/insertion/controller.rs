@@ -75,6 +75,8 @@ pub struct ControllerParams {
     pub contact_lost_n: f64,
     /// How long the force must stay below `contact_lost_n` (s).
     pub contact_lost_s: f64,
+    /// A lead of the commanded pose on the peg taken off when the contact is lost (m).
+    pub lead_snap_m: f64,
     /// Force along the axis while finding the hole (N): light, so friction does not hold the
     /// walk.
     pub find_force_n: f64,
@@ -103,6 +105,8 @@ pub struct ControllerParams {
     pub max_speed_m_per_s: f64,
     /// Largest rate of the commanded tilt (rad/s).
     pub max_tilt_rate_rad_per_s: f64,
+    /// Largest lead of the commanded pose on the peg while walking (m).
+    pub walk_lead_m: f64,
     /// Lateral walk speed towards the unsupported side at full offset (m/s).
     pub walk_m_per_s: f64,
     /// Depth past which the peg is in the hole (m below the face; the chamfer's depth is added).
@@ -127,8 +131,9 @@ impl Default for ControllerParams {
             approach_m_per_s: 0.002,
             contact_n: 0.5,
             contact_lost_n: 0.2,
-            contact_lost_s: 2e-3,
-            find_force_n: 2.0,
+            contact_lost_s: 0.5e-3,
+            lead_snap_m: 0.2e-3,
+            find_force_n: 1.0,
             centred_m: 0.3e-3,
             align_force_n: 1.0,
             aligned_moment: 0.1,
@@ -141,6 +146,7 @@ impl Default for ControllerParams {
             moment_bandwidth_hz: 3.0,
             max_speed_m_per_s: 0.005,
             max_tilt_rate_rad_per_s: 0.05,
+            walk_lead_m: 0.15e-3,
             walk_m_per_s: 0.002,
             in_hole_m: 0.5e-3,
             target_depth_m: 0.015,
@@ -254,20 +260,24 @@ impl Controller {
                 } else {
                     self.lost_s = 0.0;
                 }
-                let lost = self.lost_s >= p.contact_lost_s;
+                let lost = find && self.lost_s >= p.contact_lost_s;
                 if lost {
-                    // Guarded descent: the wrist's lead on a peg that lost its support would
-                    // fling it into the next contact; take the lead off once, where the loss
-                    // is found, and go on down at the approach speed.
+                    // Guarded descent, while finding the hole: the wrist's lead on a peg that
+                    // dropped off an edge would fling it into the next contact; take the lead
+                    // off once, where the loss is found, and go on down at the approach speed.
+                    // In the hole the peg is free between the walls most of the time, and the
+                    // insertion force's lead is what pushes it on.
                     if self.lost_s - dt < p.contact_lost_s {
-                        self.target[0] = inp.tip[0];
-                        self.target[1] = inp.tip[1];
+                        // Only a lead worth the name: a peg hovering at the hole's mouth
+                        // loses and finds contact every dither period, and a snap each time
+                        // would undo the descent.
+                        for k in 0..2 {
+                            if (self.target[k] - inp.tip[k]).abs() > p.lead_snap_m {
+                                self.target[k] = inp.tip[k];
+                            }
+                        }
                     }
-                    rate[1] = if self.phase == Phase::Insert {
-                        -p.max_speed_m_per_s
-                    } else {
-                        -p.approach_m_per_s
-                    };
+                    rate[1] = -p.approach_m_per_s;
                 } else if !search {
                     if find {
                         rate[0] = self.find_rate(inp);
@@ -326,7 +336,13 @@ impl Controller {
         if x_c.abs() < p.centred_m {
             return 0.0;
         }
-        -p.walk_m_per_s * x_c.signum()
+        // The commanded pose leads a peg that friction holds by at most `walk_lead_m`: a longer
+        // lead is a spring that flings the peg when it slips.
+        let dir = -x_c.signum();
+        if dir * (self.target[0] - inp.tip[0]) > p.walk_lead_m {
+            return 0.0;
+        }
+        p.walk_m_per_s * dir
     }
 
     /// In the align phase: true once the moment about the tip has stayed below
