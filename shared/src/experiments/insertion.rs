@@ -5,6 +5,7 @@
 use super::*;
 use crate::error::ConfigError;
 use crate::insertion::controller::{Controller, ControllerParams, Input, Method, Phase};
+use crate::insertion::estimate::{Estimator, class};
 use crate::insertion::plant::{ContactState, PegParams, PegPlant};
 use crate::insertion::whitney::Fit;
 use crate::sensor::{SensorModel, SensorParams, Wrench};
@@ -123,6 +124,11 @@ pub struct InsertionSummary {
     pub jammed_ticks: u64,
     /// Ticks spent wedged.
     pub wedged_ticks: u64,
+    /// Ticks whose estimated contact state was the true one, over those counted (outside
+    /// 10 ms of a change of the true state; two-point, jammed and wedged are one class).
+    pub state_classification_accuracy: f64,
+    /// Ticks counted.
+    pub classified_ticks: usize,
     /// Time each phase began (s): find, align, insert, done.
     pub phase_starts_s: [Option<f64>; 4],
 }
@@ -142,19 +148,7 @@ fn initial_errors(o: &InsertionOptions, seed: u64) -> (f64, f64) {
 /// face, offset and tilted by the seed's errors, and the controller inserts it 15 mm.
 pub fn insertion(opts: &Options) -> Result<Outcome<InsertionSummary>, ExperimentError> {
     let o = opts.insertion;
-    o.validate()?;
-    if opts.base.world.kind != crate::world::WorldKind::Builtin {
-        return Err(ConfigError::rule(
-            "world.kind",
-            "is `mujoco`; insertion runs on the built-in plant only: the wrist is not in MuJoCo's generated \
-             model yet (docs/insertion.md); run it without --plant",
-        )
-        .into());
-    }
-    let mut params = PegParams::default();
-    params.geometry.clearance_ratio = o.clearance_ratio;
-    params.geometry.chamfer_m = o.chamfer_mm * 1e-3;
-    params.friction = params.friction.scaled(o.mu / params.mu());
+    let params = peg_params(opts)?;
     let g = params.geometry;
     let fit = Fit {
         peg_width_m: g.peg_width_m,
@@ -182,6 +176,8 @@ pub fn insertion(opts: &Options) -> Result<Outcome<InsertionSummary>, Experiment
         (Wrench::default(), 0.0, 1.0 / sensor_params.rate_hz);
     let mut t = 0.0;
     let mut contact_t = None;
+    let mut estimator = Estimator::new(0.0, chamfer_depth, g.peg_width_m, o.mu);
+    let (mut states, mut changes, mut prev_tip_y) = (Vec::new(), Vec::new(), start[1]);
     while t < o.time_limit_s {
         let truth = *plant.truth();
         while next_sample <= t {
@@ -202,6 +198,16 @@ pub fn insertion(opts: &Options) -> Result<Outcome<InsertionSummary>, Experiment
             tip: truth.pose,
         };
         let before = ctl.phase();
+        let speed = (truth.pose[1] - prev_tip_y) / -dt;
+        prev_tip_y = truth.pose[1];
+        let truth_class = class(truth.state);
+        if states
+            .last()
+            .is_none_or(|s: &(f64, ContactState, ContactState)| s.1 != truth_class)
+        {
+            changes.push(t);
+        }
+        states.push((t, truth_class, class(estimator.update(&inp, speed, dt))));
         let (target, rate) = ctl.step(&inp, dt);
         if ctl.phase() != before {
             let k = match ctl.phase() {
@@ -243,27 +249,9 @@ pub fn insertion(opts: &Options) -> Result<Outcome<InsertionSummary>, Experiment
         (true, Some(a), Some(b)) => Some(b - a),
         _ => None,
     };
-    let checks = vec![
-        Check::at_least(
-            "inserted",
-            "depth reached in time, force in limit (1 = yes)",
-            f64::from(u8::from(inserted)),
-            1.0,
-        ),
-        Check::at_most(
-            "peak_force_over_insertion_force",
-            "largest contact force / insertion force",
-            peak / cp.insertion_force_n,
-            o.force_limit_factor,
-        ),
-        Check::at_most(
-            "insertion_time_s",
-            "time from contact to depth (s)",
-            time.unwrap_or(f64::INFINITY),
-            5.0,
-        )
-        .target(),
-    ];
+    let (right, counted) = classification(&states, &changes, TRANSITION_S);
+    let accuracy = right as f64 / counted.max(1) as f64;
+    let checks = insertion_checks(&o, inserted, peak / cp.insertion_force_n, accuracy, time);
     let figure = insertion_figure(&trace);
     Ok(Outcome {
         simulated_s: t,
@@ -282,10 +270,93 @@ pub fn insertion(opts: &Options) -> Result<Outcome<InsertionSummary>, Experiment
             jammed_ticks: jammed,
             wedged_ticks: wedged,
             phase_starts_s: starts,
+            state_classification_accuracy: accuracy,
+            classified_ticks: counted,
         },
         checks,
         figure,
     })
+}
+
+/// The set-up of `opts`, checked: the peg and hole with the options' fit and chamfer.
+fn peg_params(opts: &Options) -> Result<PegParams, ExperimentError> {
+    let o = opts.insertion;
+    o.validate()?;
+    if opts.base.world.kind != crate::world::WorldKind::Builtin {
+        return Err(ConfigError::rule(
+            "world.kind",
+            "is `mujoco`; insertion runs on the built-in plant only: the wrist is not in \
+             MuJoCo's generated model yet (docs/insertion.md); run it without --plant",
+        )
+        .into());
+    }
+    let mut params = PegParams::default();
+    params.geometry.clearance_ratio = o.clearance_ratio;
+    params.geometry.chamfer_m = o.chamfer_mm * 1e-3;
+    params.friction = params.friction.scaled(o.mu / params.mu());
+    Ok(params)
+}
+
+/// The insertion's checks.
+fn insertion_checks(
+    o: &InsertionOptions,
+    inserted: bool,
+    peak_over_force: f64,
+    accuracy: f64,
+    time: Option<f64>,
+) -> Vec<Check> {
+    vec![
+        Check::at_least(
+            "inserted",
+            "depth reached in time, force in limit (1 = yes)",
+            f64::from(u8::from(inserted)),
+            1.0,
+        ),
+        Check::at_most(
+            "peak_force_over_insertion_force",
+            "largest contact force / insertion force",
+            peak_over_force,
+            o.force_limit_factor,
+        ),
+        Check::at_least(
+            "state_classification_accuracy",
+            "contact states estimated right, outside 10 ms of a transition",
+            accuracy,
+            0.95,
+        ),
+        Check::at_most(
+            "insertion_time_s",
+            "time from contact to depth (s)",
+            time.unwrap_or(f64::INFINITY),
+            5.0,
+        )
+        .target(),
+    ]
+}
+
+/// Ticks on either side of a change of the true contact state left out of the accuracy (s).
+const TRANSITION_S: f64 = 0.01;
+
+/// How many of `states` (time, true class, estimated class) were right, and how many were
+/// counted: those farther than `window` from every time in `changes`.
+fn classification(
+    states: &[(f64, ContactState, ContactState)],
+    changes: &[f64],
+    window: f64,
+) -> (usize, usize) {
+    let (mut right, mut counted, mut k) = (0, 0, 0);
+    for &(t, truth, est) in states {
+        while k + 1 < changes.len() && changes[k + 1] <= t {
+            k += 1;
+        }
+        let near = |i: usize| changes.get(i).is_some_and(|c| (c - t).abs() < window);
+        if near(k) || near(k + 1) {
+            continue;
+        }
+        counted += 1;
+        right += usize::from(truth == est);
+    }
+    (right, counted)
 }
 
 /// Depth, contact force and tilt over time.

@@ -274,8 +274,10 @@ pub fn contacts(
             (l - w, -axis)
         };
         let side_sign = if v.x < 0.0 { -1 } else { 1 };
+        // The chamfer's top edge under the peg is the face's edge (the peg rests on the face);
+        // the chamfer's bottom edge, or the hole's edge without one, is the hole's.
         let feature = if profile.corner_count == 4 && (k == 0 || k == 3) {
-            Feature::Chamfer
+            Feature::Face
         } else {
             Feature::Wall
         };

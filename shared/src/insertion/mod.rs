@@ -1,7 +1,10 @@
 //! Force-guided insertion (docs/insertion.md): a rectangular peg held by a compliant wrist,
-//! a hole with an optional chamfer, and Whitney's jamming and wedging conditions.
+//! a hole with an optional chamfer ([`geometry`], [`plant`]), Whitney's jamming and wedging
+//! conditions ([`whitney`]), the insertion controller and its baselines ([`controller`]), and
+//! the contact state as the controller can know it ([`estimate`]).
 
 pub mod controller;
+pub mod estimate;
 pub mod geometry;
 pub mod plant;
 pub mod whitney;

@@ -138,6 +138,8 @@ pub struct PegPlant {
     substep_s: f64,
     /// The contact force and its moment about the centre of mass in the last sub-step.
     last_contact: (Vec2, f64),
+    /// Each slot's normal force in the last sub-step (N).
+    normal_n: [f64; SLOTS],
 }
 
 impl PegPlant {
@@ -163,6 +165,7 @@ impl PegPlant {
             truth: PegTruth::default(),
             substep_s: 0.2 / omega,
             last_contact: (Vec2::zeros(), 0.0),
+            normal_n: [0.0; SLOTS],
         };
         p.truth = p.observe(&[], 0);
         p
@@ -268,6 +271,7 @@ impl PegPlant {
             } else {
                 p.presliding.stiffness_n_per_m * self.bristles[c.slot].deflection_m
             };
+            self.normal_n[c.slot] = fnorm;
             let fc = c.normal * fnorm - tangent * fr;
             f += fc;
             m += cross(r, fc);
@@ -280,6 +284,11 @@ impl PegPlant {
             if !seen {
                 bristle.reset();
                 *touching = None;
+            }
+        }
+        for (seen, f) in seen.iter().zip(self.normal_n.iter_mut()) {
+            if !seen {
+                *f = 0.0;
             }
         }
         (f, m)
@@ -295,7 +304,7 @@ impl PegPlant {
         let p = &self.params;
         let (force, moment_com) = self.last_contact;
         let moment = moment_com + cross(com - tip, force);
-        let (state, edge) = classify(found, tip_vel.y, p);
+        let (state, edge) = classify(found, &self.normal_n, tip_vel.y, p);
         PegTruth {
             pose: tip_pose,
             velocity: [tip_vel.x, tip_vel.y, self.v[2]],
@@ -320,8 +329,24 @@ fn empty_contact() -> Contact {
     }
 }
 
+/// A contact carrying less than this is not counted in the contact state (N): ten times the
+/// force sensor's noise; a lighter touch (the peg brushing a wall under the dither) is free.
+pub const LEAST_CONTACT_N: f64 = 0.2;
+
 /// The contact state from the contacts and the tip's insertion speed (docs/insertion.md).
-fn classify(found: &[Contact], tip_vy: f64, p: &PegParams) -> (ContactState, Option<f64>) {
+fn classify(
+    found: &[Contact],
+    normal_n: &[f64; SLOTS],
+    tip_vy: f64,
+    p: &PegParams,
+) -> (ContactState, Option<f64>) {
+    let mut kept = [empty_contact(); SLOTS];
+    let mut n = 0;
+    for c in found.iter().filter(|c| normal_n[c.slot] >= LEAST_CONTACT_N) {
+        kept[n] = *c;
+        n += 1;
+    }
+    let found = &kept[..n];
     if found.is_empty() {
         return (ContactState::Free, None);
     }
