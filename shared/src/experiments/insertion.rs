@@ -164,7 +164,11 @@ pub fn insertion(opts: &Options) -> Result<Outcome<InsertionSummary>, Experiment
     };
     let mut sensor = SensorModel::new(sensor_params, opts.seed);
     let tare = crate::sim::tare(&mut sensor);
-    let cp = ControllerParams::default();
+    // The controller knows μ as friction identification gives it.
+    let cp = ControllerParams {
+        mu: o.mu,
+        ..ControllerParams::default()
+    };
     let chamfer_depth = g.chamfer_m / g.chamfer_angle_deg.to_radians().tan().max(1e-9);
     let mut ctl = Controller::new(cp, o.method, params.wrist_stiffness, start, chamfer_depth);
     let dt = 1e-4;

@@ -105,8 +105,12 @@ pub struct ControllerParams {
     pub max_speed_m_per_s: f64,
     /// Largest rate of the commanded tilt (rad/s).
     pub max_tilt_rate_rad_per_s: f64,
-    /// Largest lead of the commanded pose on the peg while walking (m).
+    /// Least bound on the lead of the commanded pose on the peg while walking (m).
     pub walk_lead_m: f64,
+    /// The lead's bound as a multiple of the lead that pulls the press's friction μ F.
+    pub walk_lead_over_friction: f64,
+    /// The friction coefficient μ as identified (friction-id, fig. 4.6).
+    pub mu: f64,
     /// Lateral walk speed towards the unsupported side at full offset (m/s).
     pub walk_m_per_s: f64,
     /// Depth past which the peg is in the hole (m below the face; the chamfer's depth is added).
@@ -147,6 +151,8 @@ impl Default for ControllerParams {
             max_speed_m_per_s: 0.005,
             max_tilt_rate_rad_per_s: 0.05,
             walk_lead_m: 0.15e-3,
+            walk_lead_over_friction: 1.5,
+            mu: 0.3,
             walk_m_per_s: 0.002,
             in_hole_m: 0.5e-3,
             target_depth_m: 0.015,
@@ -336,10 +342,14 @@ impl Controller {
         if x_c.abs() < p.centred_m {
             return 0.0;
         }
-        // The commanded pose leads a peg that friction holds by at most `walk_lead_m`: a longer
-        // lead is a spring that flings the peg when it slips.
+        // The commanded pose leads a peg that friction holds by at most the lead that pulls
+        // `walk_lead_over_friction` times the press's friction (and at least `walk_lead_m`): a
+        // longer lead is a spring that flings the peg when it slips, a shorter one cannot
+        // move it.
         let dir = -x_c.signum();
-        if dir * (self.target[0] - inp.tip[0]) > p.walk_lead_m {
+        let lead =
+            (p.walk_lead_over_friction * p.mu * p.find_force_n / self.wrist[0]).max(p.walk_lead_m);
+        if dir * (self.target[0] - inp.tip[0]) > lead {
             return 0.0;
         }
         p.walk_m_per_s * dir

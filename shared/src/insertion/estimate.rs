@@ -3,8 +3,9 @@
 //! robot knows) and the nominal chamfer, never from the part's true position.
 //!
 //! * free: the contact force under `free_n` and its moment about the tip under `free_nm`;
-//! * face: the tip at the face (depth under `face_band_m`);
-//! * chamfer: the tip between the face and the chamfer's depth;
+//! * face: the point of the tip face the part pushes on (its centre of pressure) at the face
+//!   (depth under `face_band_m`);
+//! * chamfer: that point between the face and the chamfer's depth;
 //! * in the hole, Whitney's balance (docs/insertion.md) with the hole's edge at
 //!   l = depth − chamfer depth along the peg gives both contacts' normal forces from the
 //!   measured lateral force and moment: two-point when, for one of the two tilts, both press
@@ -52,9 +53,9 @@ impl Estimator {
             mu,
             free_n: 0.2,
             face_band_m: 20e-6,
-            two_point_n: 0.2,
+            two_point_n: 0.05,
             stopped_m_per_s: 1e-5,
-            free_nm: 2e-3,
+            free_nm: 1e-3,
             filter_s: 2e-3,
             filtered: ([0.0; 2], 0.0),
         }
@@ -87,10 +88,19 @@ impl Estimator {
             return ContactState::Free;
         }
         let depth = self.face_y_m - inp.tip[1];
-        if depth < self.face_band_m {
+        // Where on the tip face the part pushes (the centre of pressure x_c = M/F_y, within
+        // the face) and how deep that point is: a tilted peg on the face's edge has its tip's
+        // centre below the face, the point it rests on at the face.
+        let x_c = if fy > 0.0 {
+            (inp.moment_nm / fy).clamp(-r, r)
+        } else {
+            0.0
+        };
+        let contact_depth = depth - x_c * inp.tip[2].sin();
+        if contact_depth < self.face_band_m {
             return ContactState::Face;
         }
-        if depth <= self.chamfer_depth_m + self.face_band_m {
+        if contact_depth <= self.chamfer_depth_m + self.face_band_m {
             return ContactState::Chamfer;
         }
         let l = (depth - self.chamfer_depth_m).max(1e-6);
