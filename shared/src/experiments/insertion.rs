@@ -53,28 +53,20 @@ impl Default for InsertionOptions {
 impl InsertionOptions {
     /// Checks the settings.
     pub fn validate(&self) -> Result<(), ConfigError> {
+        // (name, value, upper bound, whether 0 is allowed): a chamfer may be 0 (a sharp edge);
+        // a clearance, a friction or a time may not.
         let rules = [
-            ("insertion.clearance", self.clearance_ratio, 0.0..0.5),
-            ("insertion.mu", self.mu, 0.0..2.0),
-            ("insertion.chamfer_mm", self.chamfer_mm, 0.0..3.0),
-            ("insertion.time_limit_s", self.time_limit_s, 0.0..600.0),
+            ("insertion.clearance", self.clearance_ratio, 0.5, false),
+            ("insertion.mu", self.mu, 2.0, false),
+            ("insertion.chamfer_mm", self.chamfer_mm, 3.0, true),
+            ("insertion.time_limit_s", self.time_limit_s, 600.0, false),
         ];
-        for (name, v, range) in rules {
-            // A chamfer may be 0 (a sharp edge); a clearance, a friction or a time may not.
-            let start_ok = v == range.start && name.contains("chamfer");
-            if !(v.is_finite() && (range.contains(&v) && v > range.start || start_ok)) {
+        for (name, v, max, zero_ok) in rules {
+            if !(v.is_finite() && (v > 0.0 || zero_ok && v == 0.0) && v < max) {
+                let zero = if zero_ok { " or 0" } else { "" };
                 return Err(ConfigError::rule(
                     name,
-                    format!(
-                        "is {v}; it must be in ({}, {}){}",
-                        range.start,
-                        range.end,
-                        if name.contains("chamfer") {
-                            " or 0"
-                        } else {
-                            ""
-                        }
-                    ),
+                    format!("is {v}; it must be in (0, {max}){zero}"),
                 ));
             }
         }

@@ -141,12 +141,13 @@ pub fn fig5_9(opts: &Options) -> Result<Outcome<Fig59Summary>, ExperimentError> 
         noise_force_n: 0.02,
         ..opts.base.sensor
     };
+    let dt = 1e-4;
     let mut rig = Rig {
-        plant: BoxWorld::new(&opts.base, params, touch, 1e-4)?,
+        plant: BoxWorld::new(&opts.base, params, touch, dt)?,
         sensor: SensorModel::new(sensor_params, opts.seed),
         target: [touch[0] - 0.0006, touch[1] - 0.0006, tilt0],
         t: 0.0,
-        dt: 1e-4,
+        dt,
         sensor_period: 1.0 / sensor_params.rate_hz,
         next_sample: 0.0,
         reading: Wrench::default(),

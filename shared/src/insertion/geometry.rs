@@ -95,6 +95,20 @@ pub struct Contact {
     pub along_peg_m: Option<f64>,
 }
 
+impl Default for Contact {
+    /// No contact: the fill of a contact buffer.
+    fn default() -> Self {
+        Self {
+            depth_m: 0.0,
+            normal: Vec2::zeros(),
+            point: Vec2::zeros(),
+            feature: (Feature::Face, 0),
+            slot: 0,
+            along_peg_m: None,
+        }
+    }
+}
+
 impl PegHoleGeometry {
     /// Hole width D (m).
     pub fn hole_width_m(&self) -> f64 {
@@ -368,14 +382,7 @@ mod tests {
         let half = 0.5 * g.hole_width_m();
         // Tip 5 mm deep, shifted so the left side passes 2 µm left of the edge (−half, 0).
         let pose = [-half + 0.005 - 2e-6, -0.005, 0.0];
-        let mut out = [Contact {
-            depth_m: 0.0,
-            normal: Vec2::zeros(),
-            point: Vec2::zeros(),
-            feature: (Feature::Face, 0),
-            slot: 0,
-            along_peg_m: None,
-        }; 4 + MAX_CORNERS];
+        let mut out = [Contact::default(); 4 + MAX_CORNERS];
         let n = contacts(&g, &profile, pose, &mut out);
         let edge: Vec<_> = out[..n].iter().filter(|c| c.slot >= 4).collect();
         assert_eq!(edge.len(), 1, "{:?}", &out[..n]);

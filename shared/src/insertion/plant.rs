@@ -192,7 +192,7 @@ impl PegPlant {
     pub fn step(&mut self, target: [f64; 3], target_vel: [f64; 3], dt: f64) {
         let n = (dt / self.substep_s).ceil().max(1.0) as usize;
         let h = dt / n as f64;
-        let mut found = [empty_contact(); SLOTS];
+        let mut found = [Contact::default(); SLOTS];
         let mut count = 0;
         for _ in 0..n {
             count = contacts(
@@ -318,17 +318,6 @@ impl PegPlant {
     }
 }
 
-fn empty_contact() -> Contact {
-    Contact {
-        depth_m: 0.0,
-        normal: Vec2::zeros(),
-        point: Vec2::zeros(),
-        feature: (Feature::Face, 0),
-        slot: 0,
-        along_peg_m: None,
-    }
-}
-
 /// A contact carrying less than this is not counted in the contact state (N): ten times the
 /// force sensor's noise; a lighter touch (the peg brushing a wall under the dither) is free.
 pub const LEAST_CONTACT_N: f64 = 0.2;
@@ -340,7 +329,7 @@ fn classify(
     tip_vy: f64,
     p: &PegParams,
 ) -> (ContactState, Option<f64>) {
-    let mut kept = [empty_contact(); SLOTS];
+    let mut kept = [Contact::default(); SLOTS];
     let mut n = 0;
     for c in found.iter().filter(|c| normal_n[c.slot] >= LEAST_CONTACT_N) {
         kept[n] = *c;
