@@ -3,7 +3,7 @@
 //! and the safe state entered from each mode. Driven through the lockstep (plant and sensor in
 //! the loop), with the estimator's answers given by hand.
 
-use afs_shared::servo::{ServoCore, ServoMode};
+use afs_shared::servo::{ServoCore, ServoMode, Trigger};
 use afs_shared::sim::{Lockstep, SimConfig};
 use afs_shared::tangent::{ReprobeReason, TangentError, TangentOutcome};
 
@@ -167,4 +167,129 @@ fn the_safe_state_from_each_mode() {
     sim.servo_mut().apply_tangent_outcome(&outcome);
     assert_eq!(sim.servo().mode(), ServoMode::Resuming);
     assert_eq!(sim.servo().counters().aborted, 0);
+}
+
+/// `ticks` fast-loop ticks with the tool off the surface (a zero wrench after the tare), the
+/// arm where the lockstep left it.
+fn lift_off(sim: &mut Lockstep, ticks: usize) {
+    let dt = sim.dt();
+    let (q, qd) = (sim.truth().q, sim.truth().qd);
+    for _ in 0..ticks {
+        let inp = afs_shared::servo::ServoInput {
+            q,
+            qd,
+            wrench: sim.servo().tare(),
+            force_valid: true,
+        };
+        sim.servo_mut().step(&inp, dt);
+    }
+}
+
+/// The contact guard: a probe run that loses the contact (normal force below a fifth of the
+/// preload for 5 ms) while tracking on its own is abandoned, and tracking goes on at once at
+/// the old speed with the triggers disarmed for `contact_lost_travel_m`; a shorter loss does
+/// not; with automatic tracking off (an estimate on request only) the guard stays out.
+#[test]
+fn a_probe_that_loses_the_contact_is_abandoned_while_tracking() {
+    for enabled in [true, false] {
+        let cfg = SimConfig {
+            tangent_error_rad: 3f64.to_radians(),
+            ..SimConfig::default()
+        };
+        let mut cfg = cfg;
+        cfg.servo.tracking.enabled = enabled;
+        let mut sim = Lockstep::new(&cfg).unwrap();
+        sim.set_auto_estimate(false);
+        sim.servo_mut().hybrid_mut().set_velocity(0.005);
+        sim.run(3000);
+        sim.servo_mut().request_tangent_estimate();
+        until(&mut sim, ServoMode::Probing, 40_000);
+        sim.run(100);
+        lift_off(&mut sim, 45);
+        assert_eq!(
+            sim.servo().mode(),
+            ServoMode::Probing,
+            "4.5 ms is not a loss"
+        );
+        sim.run(10);
+        lift_off(&mut sim, 45);
+        assert_eq!(sim.servo().mode(), ServoMode::Probing, "the count restarts");
+        lift_off(&mut sim, 10);
+        let c = sim.servo().counters();
+        if enabled {
+            assert_eq!(sim.servo().mode(), ServoMode::Track);
+            assert_eq!(c.contact_losses, 1);
+            assert_eq!(sim.servo().hybrid().velocity_target(), 0.005);
+            assert!(sim.servo().pending_probe().is_none());
+            let t = cfg.servo.tracking;
+            // Owed: the travel to `contact_lost_travel_m` (the feed has moved a few µm since).
+            let owed = sim.servo().state().track.odometer_m - t.min_travel_m;
+            assert!(
+                (owed + t.contact_lost_travel_m).abs() < 1e-5,
+                "{owed} m owed"
+            );
+        } else {
+            assert_eq!(sim.servo().mode(), ServoMode::Probing);
+            assert_eq!(c.contact_losses, 0);
+        }
+    }
+}
+
+/// Confirming a corner: an accepted estimate that turns the tangent by more than
+/// `corner_angle_deg` makes the tracker estimate once more after `corner_confirm_m` of travel
+/// (trigger `travel`), and only once; with `corner_confirm_m` = 0 it does not.
+#[test]
+fn an_estimate_that_turns_a_corner_is_confirmed_once() {
+    for confirm in [0.003, 0.0] {
+        let mut cfg = SimConfig {
+            tangent_error_rad: 8f64.to_radians(),
+            ..SimConfig::default()
+        };
+        cfg.servo.tracking.enabled = true;
+        cfg.servo.tracking.corner_confirm_m = confirm;
+        let mut sim = Lockstep::new(&cfg).unwrap();
+        sim.set_auto_estimate(false);
+        sim.servo_mut().hybrid_mut().set_velocity(0.005);
+        sim.run(3000);
+        // First answer: the tangent as it is (no turn); second: the estimator's, 8° on.
+        let base = sim.servo().hybrid().frame().tangent_angle;
+        for turn in [false, true] {
+            sim.servo_mut().request_tangent_estimate();
+            until(&mut sim, ServoMode::AwaitingEstimate, 240_000);
+            let outcome = match estimate(sim.servo()) {
+                TangentOutcome::Estimate(mut e) if !turn => {
+                    e.tangent_angle_rad = base;
+                    TangentOutcome::Estimate(e)
+                }
+                o => o,
+            };
+            assert!(
+                matches!(outcome, TangentOutcome::Estimate(_)),
+                "{outcome:?}"
+            );
+            sim.servo_mut().apply_tangent_outcome(&outcome);
+            until(&mut sim, ServoMode::Track, 40_000);
+        }
+        let flags = sim.servo().state().flags;
+        let confirming = flags.contains(afs_shared::servo::ServoStateFlags::CONFIRM_CORNER);
+        assert_eq!(confirming, confirm > 0.0);
+        // 6 mm at 5 mm/s: one travel-triggered estimation, at 3 mm, if confirming; none
+        // otherwise, nor after the confirmation.
+        let before = sim.servo().counters().started;
+        for _ in 0..12_000 {
+            sim.step();
+            if sim.servo().mode() == ServoMode::Stopping {
+                let t = sim.servo().state().track.odometer_m;
+                assert!((t - confirm).abs() < 5e-4, "confirmed at {t} m");
+                assert_eq!(sim.servo().last_trigger(), Some(Trigger::Travel));
+                until(&mut sim, ServoMode::AwaitingEstimate, 240_000);
+                let outcome = estimate(sim.servo());
+                sim.servo_mut().apply_tangent_outcome(&outcome);
+                until(&mut sim, ServoMode::Track, 40_000);
+            }
+        }
+        let c = sim.servo().counters();
+        assert_eq!(c.started - before, u32::from(confirm > 0.0), "{c:?}");
+        assert_eq!(c.slope_triggers + c.force_triggers, 0, "{c:?}");
+    }
 }

@@ -120,6 +120,10 @@ pub struct ServoCore {
     resume_a_omega: Option<f64>,
     /// The probe stroke commanded last tick (to absorb it if the probe is abandoned).
     last_stroke: SetpointOffset,
+    /// Consecutive ticks the normal force has been below the contact guard's threshold.
+    contact_lost_ticks: u32,
+    /// The last estimate turned a corner: estimate once more `corner_confirm_m` on.
+    confirm_corner: bool,
 }
 
 /// Probe samples are recorded every this many servo ticks (1 kHz at 10 kHz).
@@ -225,6 +229,8 @@ impl ServoCore {
             safe: None,
             resume_a_omega: None,
             last_stroke: SetpointOffset::default(),
+            contact_lost_ticks: 0,
+            confirm_corner: false,
         })
     }
 
@@ -445,6 +451,7 @@ impl ServoCore {
         let nominal = self.hybrid.nominal_velocity().abs();
         if valid && !safe {
             self.check_triggers(dt, normal);
+            self.guard_contact(dt, normal);
         }
         if self.tuning && valid && !safe && nominal > 0.0 && self.mode == ServoMode::Track {
             let input = TunerInput {

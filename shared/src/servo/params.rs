@@ -140,6 +140,22 @@ pub struct TrackingParams {
     /// A change of tangent larger than this between two estimates is a corner whatever the
     /// distance (deg).
     pub corner_angle_deg: f64,
+    /// The contact guard (while tracking on its own): when the normal force stays below this
+    /// fraction of the preload for `contact_lost_s` during a probe run, a stroke has carried
+    /// the tool off the surface (over an edge). The run is abandoned and tracking goes on along
+    /// the old tangent with the force loop on; the tracker travels `contact_lost_travel_m`
+    /// before it estimates again. 0 turns the guard off.
+    pub contact_lost_fraction: f64,
+    /// How long the normal force must stay below `contact_lost_fraction` of the preload (s).
+    pub contact_lost_s: f64,
+    /// Travel after an abandoned probe run before the tracker estimates again (m): far enough
+    /// past the edge that the next probe's strokes stay on the face beyond it.
+    pub contact_lost_travel_m: f64,
+    /// After an estimate that turns the tangent by more than `corner_angle_deg` (a corner),
+    /// estimate once more this far on (m), where the probe's strokes no longer reach the
+    /// corner: a probe near a corner feels both faces, and its answer can be off by less
+    /// than the drift trigger sees. 0: no confirmation.
+    pub corner_confirm_m: f64,
 }
 
 impl Default for TrackingParams {
@@ -155,6 +171,10 @@ impl Default for TrackingParams {
             curvature_feedforward: true,
             max_curvature_per_m: 10.0,
             corner_angle_deg: 5.0,
+            contact_lost_fraction: 0.2,
+            contact_lost_s: 0.005,
+            contact_lost_travel_m: 0.003,
+            corner_confirm_m: 0.003,
         }
     }
 }
@@ -178,6 +198,69 @@ impl Default for ServoParams {
             tracking: TrackingParams::default(),
             safe: SafeParams::default(),
         }
+    }
+}
+
+impl TrackingParams {
+    /// Checks the settings; the message names the field.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        // (name, value, least, most, least allowed)
+        let ranges = [
+            (
+                "force_trigger_fraction",
+                self.force_trigger_fraction,
+                0.0,
+                1.0,
+                false,
+            ),
+            ("force_filter_s", self.force_filter_s, 0.0, 10.0, true),
+            (
+                "slope_trigger_deg",
+                self.slope_trigger_deg,
+                0.0,
+                90.0,
+                false,
+            ),
+            ("slope_window_m", self.slope_window_m, 0.0, 1.0, false),
+            ("min_travel_m", self.min_travel_m, 0.0, 1.0, true),
+            ("max_travel_m", self.max_travel_m, 0.0, 10.0, true),
+            (
+                "max_curvature_per_m",
+                self.max_curvature_per_m,
+                0.0,
+                1e4,
+                true,
+            ),
+            ("corner_angle_deg", self.corner_angle_deg, 0.0, 180.0, false),
+            (
+                "contact_lost_fraction",
+                self.contact_lost_fraction,
+                0.0,
+                1.0,
+                true,
+            ),
+            ("contact_lost_s", self.contact_lost_s, 0.0, 1.0, false),
+            (
+                "contact_lost_travel_m",
+                self.contact_lost_travel_m,
+                0.0,
+                1.0,
+                true,
+            ),
+            ("corner_confirm_m", self.corner_confirm_m, 0.0, 1.0, true),
+        ];
+        for (name, v, lo, hi, lo_ok) in ranges {
+            let above = if lo_ok { v >= lo } else { v > lo };
+            if !(v.is_finite() && above && v <= hi) {
+                let open = if lo_ok { "[" } else { "(" };
+                return Err(ConfigError::setting(
+                    format!("servo.tracking.{name}"),
+                    v,
+                    format!("must lie in {open}{lo}, {hi}]"),
+                ));
+            }
+        }
+        Ok(())
     }
 }
 
@@ -230,6 +313,7 @@ impl ServoParams {
             ));
         }
         self.safe.validate()?;
+        self.tracking.validate()?;
         self.tuner.validate()?;
         self.friction_model.validate()?;
         if !(self.friction_model_reference_n.is_finite() && self.friction_model_reference_n > 0.0) {
@@ -252,5 +336,54 @@ impl ServoParams {
     /// Servo period (s).
     pub fn dt(&self) -> f64 {
         1.0 / self.rate_hz
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The defaults pass; a value outside its range, or not a number, is refused by the
+    /// setting's name; the open and closed ends are where the message says.
+    #[test]
+    fn tracking_settings_are_checked_by_name() {
+        assert_eq!(ServoParams::default().validate(), Ok(()));
+        let refused = |t: TrackingParams| {
+            ServoParams {
+                tracking: t,
+                ..ServoParams::default()
+            }
+            .validate()
+            .unwrap_err()
+            .to_string()
+        };
+        let base = TrackingParams::default();
+        let e = refused(TrackingParams {
+            contact_lost_fraction: 1.5,
+            ..base
+        });
+        assert_eq!(
+            e,
+            "servo.tracking.contact_lost_fraction = 1.5 must lie in [0, 1]"
+        );
+        let e = refused(TrackingParams {
+            force_trigger_fraction: f64::NAN,
+            ..base
+        });
+        assert!(
+            e.starts_with("servo.tracking.force_trigger_fraction = NaN"),
+            "{e}"
+        );
+        let e = refused(TrackingParams {
+            contact_lost_s: 0.0,
+            ..base
+        });
+        assert_eq!(e, "servo.tracking.contact_lost_s = 0 must lie in (0, 1]");
+        let off = TrackingParams {
+            contact_lost_fraction: 0.0,
+            min_travel_m: 0.0,
+            ..base
+        };
+        assert_eq!(off.validate(), Ok(()));
     }
 }

@@ -33,6 +33,8 @@ wire_flags! {
         const RESUME_A_OMEGA = 16;
         /// An accepted estimate so far (`last_estimate_rad`, `last_estimate_at_m`).
         const LAST_ESTIMATE = 32;
+        /// The last estimate turned a corner: estimate once more `corner_confirm_m` on.
+        const CONFIRM_CORNER = 64;
     }
 }
 
@@ -84,8 +86,8 @@ wire_struct! {
         pub flags: ServoStateFlags,
         /// What started the last estimation: 0 none, else a [`Trigger`] code.
         pub last_trigger: u32,
-        /// Reserved (0).
-        pub reserved: u32,
+        /// Consecutive ticks the normal force has been below the contact guard's threshold.
+        pub contact_lost_ticks: u32,
         /// The tangent estimation's counters.
         pub counters: EstimationCounters,
         /// Joint servos.
@@ -147,12 +149,13 @@ impl ServoCore {
             self.resume_a_omega.is_some(),
         );
         flags.set(ServoStateFlags::LAST_ESTIMATE, self.last_estimate.is_some());
+        flags.set(ServoStateFlags::CONFIRM_CORNER, self.confirm_corner);
         let (last_estimate_rad, last_estimate_at_m) = self.last_estimate.unwrap_or((0.0, 0.0));
         ServoState {
             mode: self.mode.into(),
             flags,
             last_trigger: self.last_trigger.map_or(0, u32::from),
-            reserved: 0,
+            contact_lost_ticks: self.contact_lost_ticks,
             counters: self.counters,
             joints: self.pid.state(),
             hybrid: self.hybrid.state(),
@@ -183,6 +186,7 @@ impl ServoCore {
         let mode = ServoMode::try_from(st.mode).unwrap_or_default();
         let has = |f: ServoStateFlags| st.flags.contains(f);
         self.counters = st.counters;
+        self.contact_lost_ticks = st.contact_lost_ticks;
         self.pid.restore(&st.joints);
         self.hybrid.restore(&st.hybrid);
         self.dither.restore(&st.dither);
@@ -194,6 +198,7 @@ impl ServoCore {
         self.tuning = has(ServoStateFlags::TUNING);
         self.force_control = has(ServoStateFlags::FORCE_CONTROL);
         self.force_armed = has(ServoStateFlags::FORCE_ARMED);
+        self.confirm_corner = has(ServoStateFlags::CONFIRM_CORNER);
         self.last_trigger = Trigger::try_from(st.last_trigger).ok();
         self.last_q_d = Vector2::new(st.last_q_d_rad[0], st.last_q_d_rad[1]);
         self.last_estimate = has(ServoStateFlags::LAST_ESTIMATE)

@@ -41,7 +41,7 @@ wire_code! {
         Force = 2,
         /// The normal set-point drifted against the travel.
         Slope = 3,
-        /// Periodic, by travel.
+        /// By travel: periodic (`max_travel_m`), or once after a corner (`corner_confirm_m`).
         Travel = 4,
     }
 }
@@ -82,9 +82,9 @@ wire_struct! {
         pub aborted: u32,
         /// Entries into the safe state.
         pub safe_entries: u32,
-        /// Reserved (0).
-        #[serde(skip)]
-        pub reserved: u32,
+        /// Contacts lost while feeding or probing (the contact guard held the feed or abandoned
+        /// the probe run; [`super::TrackingParams::contact_lost_fraction`]).
+        pub contact_losses: u32,
     }
 }
 
@@ -97,7 +97,9 @@ wire_struct! {
         pub resume_velocity_m_per_s: f64,
         /// Filtered dither-period mean of the normal force (N).
         pub normal_filtered_n: f64,
-        /// Travel since the last accepted estimate (m).
+        /// Travel since the last accepted estimate (m); after a probe run abandoned by the
+        /// contact guard it starts below zero, at `min_travel_m − contact_lost_travel_m`, so
+        /// the triggers re-arm only once the tool has travelled `contact_lost_travel_m`.
         pub odometer_m: f64,
         /// Travel in all (m).
         pub odometer_total_m: f64,
@@ -160,11 +162,20 @@ impl ServoCore {
                 self.counters.estimates += 1;
                 let t = self.params.tracking;
                 let angle = e.tangent_angle_rad;
+                // The estimate before this one turned a corner: the pair straddles it, and
+                // implies no curvature.
+                let after_corner = self.confirm_corner;
+                self.confirm_corner = t.corner_confirm_m > 0.0
+                    && self.last_estimate.is_some_and(|(prev, _)| {
+                        crate::math::wrap_angle(angle - prev).abs()
+                            > t.corner_angle_deg.to_radians()
+                    });
                 self.track.curvature_per_m = match self.last_estimate {
                     Some((prev, at)) if t.curvature_feedforward => {
                         let ds = self.track.odometer_total_m - at;
                         let dth = crate::math::wrap_angle(angle - prev);
                         let corner = dth.abs() > t.corner_angle_deg.to_radians()
+                            || after_corner
                             || self.last_trigger == Some(Trigger::Force)
                             || ds <= 1e-3
                             || (dth / ds).abs() > t.max_curvature_per_m;
@@ -188,6 +199,7 @@ impl ServoCore {
             }
             TangentOutcome::Failed(_) => {
                 self.counters.failures += 1;
+                self.confirm_corner = false;
                 self.resume();
             }
         }
@@ -198,6 +210,7 @@ impl ServoCore {
     pub fn give_up_estimate(&mut self) {
         if self.mode == ServoMode::AwaitingEstimate {
             self.counters.failures += 1;
+            self.confirm_corner = false;
             self.resume();
         }
     }
@@ -230,6 +243,43 @@ impl ServoCore {
             self.track.settled_s = 0.0;
         }
         self.track.settled_s >= self.params.tangent.settle_s || self.track.stopped_s > 3.0
+    }
+
+    /// The contact guard, while tracking on its own (`enabled`): when the normal force has
+    /// stayed below `contact_lost_fraction` of the preload for `contact_lost_s` during a probe
+    /// run, the strokes have carried the tool
+    /// off the surface (the probe sat on an edge). The run is abandoned (the set-point stays
+    /// where the stroke took it) and tracking goes on at once along the old tangent with the
+    /// force loop on, which presses the tool onto the face past the edge; the tracker travels
+    /// `contact_lost_travel_m` before it estimates again, so the next probe runs on that face. Holding
+    /// the feed instead would leave the tool on the edge, where the force loop pushes it off
+    /// again (docs/surface-tracking.md).
+    pub(super) fn guard_contact(&mut self, dt: f64, normal: f64) {
+        let t = self.params.tracking;
+        let preload = self.hybrid.params().preload_n;
+        if self.mode != ServoMode::Probing
+            || !t.enabled
+            || t.contact_lost_fraction <= 0.0
+            || normal >= t.contact_lost_fraction * preload
+        {
+            self.contact_lost_ticks = 0;
+            return;
+        }
+        self.contact_lost_ticks = self.contact_lost_ticks.saturating_add(1);
+        if f64::from(self.contact_lost_ticks) * dt < t.contact_lost_s {
+            return;
+        }
+        self.contact_lost_ticks = 0;
+        self.counters.contact_losses += 1;
+        self.hybrid.absorb_offset(self.last_stroke.displacement);
+        self.last_stroke = crate::hybrid::SetpointOffset::default();
+        self.probe.reset();
+        self.reprobe = false;
+        self.track.odometer_m = (t.min_travel_m - t.contact_lost_travel_m).min(0.0);
+        self.track.drift_rad = 0.0;
+        self.force_armed = false;
+        self.mode = ServoMode::Track;
+        self.hybrid.set_velocity(self.track.resume_velocity_m_per_s);
     }
 
     pub(super) fn check_triggers(&mut self, dt: f64, normal: f64) {
@@ -283,7 +333,9 @@ impl ServoCore {
         }
         if self.track.drift_rad.abs() > t.slope_trigger_deg.to_radians() {
             self.begin_estimation(Trigger::Slope);
-        } else if t.max_travel_m > 0.0 && travel > t.max_travel_m {
+        } else if (t.max_travel_m > 0.0 && travel > t.max_travel_m)
+            || (self.confirm_corner && travel > t.corner_confirm_m)
+        {
             self.begin_estimation(Trigger::Travel);
         }
     }

@@ -30,6 +30,11 @@ use std::fmt::Write;
 const BOX_HALF_DEPTH_M: f64 = 0.05;
 /// Half-thickness of the surface boxes (m).
 const BOX_HALF_THICKNESS_M: f64 = 0.02;
+/// How far a face's box runs on past a valley's vertex, under the next face (m). Boxes that
+/// end at the vertex leave their end faces a fraction of the penetration from a tool pressed
+/// into the valley; MuJoCo's sphere–box contact then pushes the sphere out through the nearest
+/// face, the end, and a small tool squeezes between the boxes (docs/mujoco.md, *corners*).
+const VALLEY_OVERLAP_M: f64 = 0.002;
 
 /// Names the loader and the servo find in every model (generated or the user's).
 pub mod names {
@@ -195,26 +200,45 @@ pub fn generate(cfg: &SimConfig, solref: Option<ContactSolref>) -> String {
         f.origin_m[1],
         f.angle_rad
     );
-    for (i, s) in segments(&cfg.surface, m).iter().enumerate() {
+    let segs = segments(&cfg.surface, m);
+    let angles: Vec<f64> = segs
+        .iter()
+        .map(|s| (s[3] - s[1]).atan2(s[2] - s[0]))
+        .collect();
+    // A valley (the surface turns up) at a segment's start or end: its box runs on under the
+    // next face.
+    let valley = |a: usize, b: usize| angles[b] > angles[a];
+    for (i, s) in segs.iter().enumerate() {
         let [u0, h0, u1, h1] = *s;
-        let (du, dh) = (u1 - u0, h1 - h0);
-        let len = du.hypot(dh);
-        let angle = dh.atan2(du);
+        let len = (u1 - u0).hypot(h1 - h0);
+        let angle = angles[i];
+        let before = if i > 0 && valley(i - 1, i) {
+            VALLEY_OVERLAP_M
+        } else {
+            0.0
+        };
+        let after = if i + 1 < segs.len() && valley(i, i + 1) {
+            VALLEY_OVERLAP_M
+        } else {
+            0.0
+        };
         // The box's top face is the segment moved inward (−normal) by the tool's radius.
-        let (nx, ny) = (-angle.sin(), angle.cos());
+        let (tx, ty) = (angle.cos(), angle.sin());
+        let (nx, ny) = (-ty, tx);
         let inset = m.tool_radius_m + BOX_HALF_THICKNESS_M;
-        let cx = 0.5 * (u0 + u1) - nx * inset;
-        let cy = 0.5 * (h0 + h1) - ny * inset;
+        let along = 0.5 * (len + after - before);
+        let cx = u0 + tx * along - nx * inset;
+        let cy = h0 + ty * along - ny * inset;
         let _ = writeln!(
             x,
             "      <geom name=\"face{i}\" type=\"box\" size=\"{} {BOX_HALF_THICKNESS_M} \
              {BOX_HALF_DEPTH_M}\" pos=\"{cx} {cy} 0\" euler=\"0 0 {angle}\"/>",
-            0.5 * len
+            0.5 * (len + before + after)
         );
     }
     x.push_str("    </body>\n  </worldbody>\n  <contact>\n");
     // Explicit pairs: the tool against each face, with the friction's own reference.
-    for i in 0..segments(&cfg.surface, m).len() {
+    for i in 0..segs.len() {
         let _ = writeln!(
             x,
             "    <pair geom1=\"{}\" geom2=\"face{i}\" condim=\"3\" friction=\"{mu} {mu} 0 0 0\" \
