@@ -123,6 +123,12 @@ pub struct InsertionSummary {
     pub classified_ticks: usize,
     /// Time each phase began (s): find, align, insert, done.
     pub phase_starts_s: [Option<f64>; 4],
+    /// Samples (every 5 ms) of the applied wrench while the wrist pressed the peg in the hole
+    /// with at least 1 N, and the fraction of them inside Whitney's jamming parallelogram at
+    /// the depth of the moment (None without samples).
+    pub jamming_diagram_samples: usize,
+    /// That fraction.
+    pub inside_parallelogram: Option<f64>,
 }
 
 /// The initial errors of `seed` (uniform ±2 mm, ±2°) unless set.
@@ -167,7 +173,7 @@ pub fn insertion(opts: &Options) -> Result<Outcome<InsertionSummary>, Experiment
     let limit = o.force_limit_factor * cp.insertion_force_n;
     let (mut peak, mut depth, mut jammed, mut wedged) = (0.0f64, 0.0f64, 0u64, 0u64);
     let mut starts = [None; 4];
-    let mut trace = Vec::new();
+    let (mut trace, mut whitney, mut inside) = (Vec::new(), Vec::new(), 0usize);
     let (mut reading, mut next_sample, period) =
         (Wrench::default(), 0.0, 1.0 / sensor_params.rate_hz);
     let mut t = 0.0;
@@ -228,6 +234,17 @@ pub fn insertion(opts: &Options) -> Result<Outcome<InsertionSummary>, Experiment
             _ => {}
         }
         if ((t / dt).round() as u64).is_multiple_of(50) {
+            // The wrench the wrist applies, on Whitney's axes, while the peg is pressed in the hole.
+            let fz = -tr.applied_force.y;
+            if tr.depth_m > 0.0 && fz > WHITNEY_LEAST_FZ_N {
+                let r = 0.5 * g.peg_width_m;
+                let w = [
+                    tr.applied_force.x / fz,
+                    tr.applied_moment_about_tip / (r * fz),
+                ];
+                inside += usize::from(fit.slides(tr.depth_m, w[0], w[1]));
+                whitney.push(w);
+            }
             trace.push([
                 t,
                 tr.depth_m * 1e3,
@@ -248,7 +265,7 @@ pub fn insertion(opts: &Options) -> Result<Outcome<InsertionSummary>, Experiment
     let (right, counted) = classification(&states, &changes, TRANSITION_S);
     let accuracy = right as f64 / counted.max(1) as f64;
     let checks = insertion_checks(&o, inserted, peak / cp.insertion_force_n, accuracy, time);
-    let figure = insertion_figure(&trace);
+    let figure = insertion_figure(&trace, &whitney, &fit, depth);
     Ok(Outcome {
         simulated_s: t,
         summary: InsertionSummary {
@@ -268,6 +285,9 @@ pub fn insertion(opts: &Options) -> Result<Outcome<InsertionSummary>, Experiment
             phase_starts_s: starts,
             state_classification_accuracy: accuracy,
             classified_ticks: counted,
+            jamming_diagram_samples: whitney.len(),
+            inside_parallelogram: (!whitney.is_empty())
+                .then(|| inside as f64 / whitney.len() as f64),
         },
         checks,
         figure,
@@ -355,8 +375,13 @@ fn classification(
     (right, counted)
 }
 
-/// Depth, contact force and tilt over time.
-fn insertion_figure(trace: &[[f64; 5]]) -> Figure {
+/// The jamming diagram shows the applied wrench only while the wrist presses the peg in with at
+/// least this force (N): below it, F_x/F_z and M/(r F_z) are ratios of noise.
+const WHITNEY_LEAST_FZ_N: f64 = 0.25;
+
+/// Depth, contact force and tilt over time, and the wrench the wrist applies in the hole on
+/// Whitney's jamming diagram with its parallelogram at 1 mm and at the depth reached.
+fn insertion_figure(trace: &[[f64; 5]], whitney: &[[f64; 2]], fit: &Fit, depth_m: f64) -> Figure {
     let series = |label: &str, k: usize| Series {
         label: label.into(),
         points: trace.iter().map(|r| [r[0], r[k]]).collect(),
@@ -382,6 +407,30 @@ fn insertion_figure(trace: &[[f64; 5]]) -> Figure {
                 y_label: "tilt (deg)".into(),
                 series: vec![series("θ", 4)],
             },
+            Panel {
+                x_label: Some("F_x / F_z (applied)".into()),
+                y_label: "M / (r F_z) (applied)".into(),
+                series: jamming_series(whitney, fit, depth_m),
+            },
         ],
     }
+}
+
+/// The jamming diagram's series: the applied wrench (markers) and the parallelogram, closed,
+/// at 1 mm and at `depth_m` (it widens with depth: λ = l/(μd)).
+fn jamming_series(whitney: &[[f64; 2]], fit: &Fit, depth_m: f64) -> Vec<Series> {
+    let mut out = vec![Series {
+        label: "applied wrench in the hole".into(),
+        points: whitney.to_vec(),
+        markers: true,
+    }];
+    for l in [1e-3, depth_m.max(1e-3)] {
+        let v = fit.parallelogram(l);
+        out.push(Series {
+            label: format!("parallelogram at {:.1} mm", l * 1e3),
+            points: vec![v[0], v[1], v[2], v[3], v[0]],
+            markers: false,
+        });
+    }
+    out
 }

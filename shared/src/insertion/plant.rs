@@ -108,6 +108,11 @@ pub struct PegTruth {
     pub force: Vec2,
     /// Its moment about the tip (N·m).
     pub moment_about_tip: f64,
+    /// The force the wrist applies to the peg (N): its spring and damper, the wrench Whitney's
+    /// jamming diagram is drawn for.
+    pub applied_force: Vec2,
+    /// Its moment about the tip (N·m).
+    pub applied_moment_about_tip: f64,
     /// Contacts.
     pub contacts: usize,
     /// Contact state.
@@ -138,6 +143,8 @@ pub struct PegPlant {
     substep_s: f64,
     /// The contact force and its moment about the centre of mass in the last sub-step.
     last_contact: (Vec2, f64),
+    /// The wrist's force and its moment about the centre of mass, last substep.
+    last_wrist: (Vec2, f64),
     /// Each slot's normal force in the last sub-step (N).
     normal_n: [f64; SLOTS],
 }
@@ -165,6 +172,7 @@ impl PegPlant {
             truth: PegTruth::default(),
             substep_s: 0.2 / omega,
             last_contact: (Vec2::zeros(), 0.0),
+            last_wrist: (Vec2::zeros(), 0.0),
             normal_n: [0.0; SLOTS],
         };
         p.truth = p.observe(&[], 0);
@@ -204,6 +212,7 @@ impl PegPlant {
             let (f, m) = self.contact_wrench(&found[..count], h);
             self.last_contact = (f, m);
             let (wf, wm) = self.wrist_wrench(target, target_vel);
+            self.last_wrist = (wf, wm);
             let p = &self.params;
             let acc = [
                 (f.x + wf.x) / p.mass_kg,
@@ -304,12 +313,15 @@ impl PegPlant {
         let p = &self.params;
         let (force, moment_com) = self.last_contact;
         let moment = moment_com + cross(com - tip, force);
+        let (applied_force, applied_com) = self.last_wrist;
         let (state, edge) = classify(found, &self.normal_n, tip_vel.y, p);
         PegTruth {
             pose: tip_pose,
             velocity: [tip_vel.x, tip_vel.y, self.v[2]],
             force,
             moment_about_tip: moment,
+            applied_force,
+            applied_moment_about_tip: applied_com + cross(com - tip, applied_force),
             contacts: count,
             state,
             depth_m: -tip.y,
@@ -403,6 +415,31 @@ mod tests {
         );
         assert_eq!((t.contacts, t.state), (2, ContactState::Face));
         assert!((t.force.y - ky * (push - want)).abs() < 1e-3 * ky * push);
+    }
+
+    /// At rest on the face, leaned on by a tilted and offset wrist (its compliance centre 30 mm
+    /// above the tip), the wrench the wrist applies balances the contacts': equal and opposite
+    /// forces, and moments about the tip (not zero here: the wrist's k_θ Δθ and its force's
+    /// lever from the compliance centre).
+    #[test]
+    fn at_rest_the_applied_wrench_balances_the_contacts() {
+        let p = sharp();
+        assert!(p.compliance_above_tip_m > 0.0);
+        let mut plant = PegPlant::new(p, [0.015, 0.0, 0.0]);
+        for _ in 0..10_000 {
+            plant.step([0.0153, -2e-3, 0.02], [0.0; 3], 1e-4);
+        }
+        let t = plant.truth();
+        let v = t.velocity;
+        assert!(v[0].abs() + v[1].abs() < 1e-6 && v[2].abs() < 1e-4, "{v:?}");
+        let scale = t.force.norm();
+        assert!(
+            scale > 1.0 && t.applied_moment_about_tip.abs() > 0.01,
+            "{t:?}"
+        );
+        assert!((t.applied_force + t.force).norm() < 1e-3 * scale, "{t:?}");
+        let dm = t.applied_moment_about_tip + t.moment_about_tip;
+        assert!(dm.abs() < 1e-3 * t.applied_moment_about_tip.abs(), "{t:?}");
     }
 
     /// Dragged along the face at 10 mm/s (far above the Stribeck velocity), the friction on
