@@ -82,8 +82,8 @@ wire_struct! {
         pub aborted: u32,
         /// Entries into the safe state.
         pub safe_entries: u32,
-        /// Contacts lost while feeding or probing (the contact guard held the feed or abandoned
-        /// the probe run; [`super::TrackingParams::contact_lost_fraction`]).
+        /// Probe runs the contact guard abandoned because the strokes lost the contact
+        /// ([`super::TrackingParams::contact_lost_fraction`]).
         pub contact_losses: u32,
     }
 }
@@ -247,13 +247,12 @@ impl ServoCore {
 
     /// The contact guard, while tracking on its own (`enabled`): when the normal force has
     /// stayed below `contact_lost_fraction` of the preload for `contact_lost_s` during a probe
-    /// run, the strokes have carried the tool
-    /// off the surface (the probe sat on an edge). The run is abandoned (the set-point stays
-    /// where the stroke took it) and tracking goes on at once along the old tangent with the
-    /// force loop on, which presses the tool onto the face past the edge; the tracker travels
-    /// `contact_lost_travel_m` before it estimates again, so the next probe runs on that face. Holding
-    /// the feed instead would leave the tool on the edge, where the force loop pushes it off
-    /// again (docs/surface-tracking.md).
+    /// run, the strokes have carried the tool off the surface (the probe sat on an edge). The
+    /// run is abandoned (the set-point stays where the stroke took it) and tracking goes on at
+    /// once along the old tangent with the force loop on, which presses the tool onto the face
+    /// past the edge; the tracker travels `contact_lost_travel_m` before it estimates again, so
+    /// the next probe runs on that face. Holding the feed instead would leave the tool on the
+    /// edge, where the force loop pushes it off again (docs/surface-tracking.md).
     pub(super) fn guard_contact(&mut self, dt: f64, normal: f64) {
         let t = self.params.tracking;
         let preload = self.hybrid.params().preload_n;
