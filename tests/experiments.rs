@@ -404,3 +404,73 @@ fn a_seed_sweep_reports_each_checks_distribution() {
     }
     let _ = std::fs::remove_dir_all(dir);
 }
+
+/// The insertion grid (`--grid`): every method at each of the 18 fits over the seeds, each
+/// point's count the one the single runs give; its plot; refused (exit 2) on another
+/// experiment or without `--seeds`.
+#[test]
+fn the_insertion_grid_runs_every_method_at_every_fit() {
+    use afs_shared::insertion::controller::Method;
+    let dir = std::env::temp_dir().join(format!("afs-grid-test-{}", std::process::id()));
+    let out = afs()
+        .args([
+            "experiment",
+            "insertion",
+            "--grid",
+            "--seeds",
+            "1..2",
+            "--jobs",
+            "2",
+        ])
+        .args(["--json", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).expect(&err);
+    assert_eq!(
+        out.status.success(),
+        r["passed"].as_bool().unwrap(),
+        "{err}"
+    );
+    let points = r["points"].as_array().unwrap();
+    assert_eq!(points.len(), 18 * 3);
+    assert!(std::path::Path::new(r["plot"].as_str().unwrap()).is_file());
+    // The tightest, roughest, sharp-edged fit: each method's count as the single runs give it.
+    for p in points
+        .iter()
+        .filter(|p| p["clearance_ratio"] == 0.0005 && p["mu"] == 0.5)
+    {
+        let method = Method::parse(p["method"].as_str().unwrap()).unwrap();
+        let mut opts = Options::default();
+        opts.insertion.clearance_ratio = 0.0005;
+        opts.insertion.mu = 0.5;
+        opts.insertion.chamfer_mm = p["chamfer_mm"].as_f64().unwrap();
+        opts.insertion.method = method;
+        let inserted = (1..=2)
+            .filter(|&seed| {
+                let o = experiments::insertion(&Options {
+                    seed,
+                    ..opts.clone()
+                })
+                .unwrap();
+                o.summary.inserted
+            })
+            .count();
+        assert_eq!(p["runs"], 2);
+        assert_eq!(p["inserted"].as_u64().unwrap() as usize, inserted, "{p}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    for args in [
+        &["experiment", "fig4.5", "--grid", "--seeds", "1..2"][..],
+        &["experiment", "insertion", "--grid"][..],
+    ] {
+        let out = afs().args(args).arg("--out").arg(&dir).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(
+            err.contains("--grid") || err.contains("--seeds"),
+            "{args:?}: {err}"
+        );
+    }
+}

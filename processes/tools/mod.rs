@@ -4,5 +4,6 @@
 
 pub mod bench;
 pub mod experiment;
+pub mod grid;
 pub mod plot;
 pub mod sensor;

@@ -38,11 +38,12 @@ impl Method {
         }
     }
 
+    /// The three, the dither method first.
+    pub const ALL: [Method; 3] = [Method::Dither, Method::NoDither, Method::Search];
+
     /// From its command-line name.
     pub fn parse(s: &str) -> Option<Self> {
-        [Method::Dither, Method::NoDither, Method::Search]
-            .into_iter()
-            .find(|m| m.name() == s)
+        Self::ALL.into_iter().find(|m| m.name() == s)
     }
 }
 
@@ -406,7 +407,7 @@ mod tests {
 
     #[test]
     fn methods_parse_by_name() {
-        for m in [Method::Dither, Method::NoDither, Method::Search] {
+        for m in Method::ALL {
             assert_eq!(Method::parse(m.name()), Some(m));
         }
         assert_eq!(Method::parse("spiral"), None);
