@@ -1,10 +1,12 @@
 //! Force-guided insertion (docs/insertion.md): a rectangular peg held by a compliant wrist,
 //! a hole with an optional chamfer ([`geometry`], [`plant`]), Whitney's jamming and wedging
-//! conditions ([`whitney`]), the insertion controller and its baselines ([`controller`]), and
-//! the contact state as the controller can know it ([`estimate`]).
+//! conditions ([`whitney`]), the insertion controller and its baselines ([`controller`]), the
+//! contact state as the controller can know it ([`estimate`]), and the arm with a wrist joint
+//! ([`scara`]; not yet driven).
 
 pub mod controller;
 pub mod estimate;
 pub mod geometry;
 pub mod plant;
+pub mod scara;
 pub mod whitney;
