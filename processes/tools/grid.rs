@@ -105,6 +105,36 @@ pub fn grid(
     let started = Instant::now();
     // Each point's seed plot is of no use here: it goes to a scratch folder, removed after.
     let scratch = std::env::temp_dir().join(format!("afs-grid-{}", std::process::id()));
+    let points = run_points(opts, &seeds, jobs, &scratch, stop);
+    let _ = std::fs::remove_dir_all(&scratch);
+    let points = points?;
+    let dither_at_least_both = points
+        .chunks(Method::ALL.len())
+        .filter(|p| p[1..].iter().all(|b| p[0].inserted >= b.inserted))
+        .count();
+    std::fs::create_dir_all(out_dir)
+        .with_context(|| format!("creating output directory {}", out_dir.display()))?;
+    let file = out_dir.join("insertion_grid.svg");
+    plot::render(&figure(&points), &file)?;
+    Ok(GridReport {
+        seeds: [*seeds.start(), *seeds.end()],
+        passed: dither_at_least_both == points.len() / Method::ALL.len(),
+        dither_at_least_both,
+        points,
+        plot: file.display().to_string(),
+        wall_s: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// Every method at every fit, in the order of [`CLEARANCES`], [`MUS`], [`CHAMFERS_MM`],
+/// [`Method::ALL`].
+fn run_points(
+    opts: &Options,
+    seeds: &std::ops::RangeInclusive<u64>,
+    jobs: usize,
+    scratch: &Path,
+    stop: &AtomicBool,
+) -> Result<Vec<GridPoint>> {
     let mut points = Vec::new();
     for c in CLEARANCES {
         for mu in MUS {
@@ -115,17 +145,10 @@ pub fn grid(
                     o.insertion.mu = mu;
                     o.insertion.chamfer_mm = chamfer;
                     o.insertion.method = method;
-                    let r = sweep("insertion", &o, seeds.clone(), jobs, &scratch, stop)
+                    let r = sweep("insertion", &o, seeds.clone(), jobs, scratch, stop)
                         .with_context(|| {
                             format!("grid point c = {c}, μ = {mu}, chamfer {chamfer} mm")
-                        });
-                    let r = match r {
-                        Ok(r) => r,
-                        Err(e) => {
-                            let _ = std::fs::remove_dir_all(&scratch);
-                            return Err(e);
-                        }
-                    };
+                        })?;
                     let check = |id: &str| r.checks.iter().find(|k| k.id == id);
                     let inserted =
                         check("inserted").context("insertion has no `inserted` check")?;
@@ -146,23 +169,7 @@ pub fn grid(
             }
         }
     }
-    let _ = std::fs::remove_dir_all(&scratch);
-    let dither_at_least_both = points
-        .chunks(Method::ALL.len())
-        .filter(|p| p[1..].iter().all(|b| p[0].inserted >= b.inserted))
-        .count();
-    std::fs::create_dir_all(out_dir)
-        .with_context(|| format!("creating output directory {}", out_dir.display()))?;
-    let file = out_dir.join("insertion_grid.svg");
-    plot::render(&figure(&points), &file)?;
-    Ok(GridReport {
-        seeds: [*seeds.start(), *seeds.end()],
-        passed: dither_at_least_both == points.len() / Method::ALL.len(),
-        dither_at_least_both,
-        points,
-        plot: file.display().to_string(),
-        wall_s: started.elapsed().as_secs_f64(),
-    })
+    Ok(points)
 }
 
 /// Success against clearance: a panel per μ, a series per method and chamfer.

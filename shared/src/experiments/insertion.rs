@@ -124,10 +124,10 @@ pub struct InsertionSummary {
     /// Time each phase began (s): find, align, insert, done.
     pub phase_starts_s: [Option<f64>; 4],
     /// Samples (every 5 ms) of the applied wrench while the wrist pressed the peg in the hole
-    /// with at least 1 N, and the fraction of them inside Whitney's jamming parallelogram at
-    /// the depth of the moment (None without samples).
+    /// with at least [`WHITNEY_LEAST_FZ_N`].
     pub jamming_diagram_samples: usize,
-    /// That fraction.
+    /// The fraction of them inside Whitney's jamming parallelogram at the depth of the moment
+    /// (None without samples).
     pub inside_parallelogram: Option<f64>,
 }
 
@@ -376,8 +376,8 @@ fn classification(
 }
 
 /// The jamming diagram shows the applied wrench only while the wrist presses the peg in with at
-/// least this force (N): below it, F_x/F_z and M/(r F_z) are ratios of noise.
-const WHITNEY_LEAST_FZ_N: f64 = 0.25;
+/// least this force (N): below it, F_x/F_z and M/(r F_z) divide by next to nothing.
+pub const WHITNEY_LEAST_FZ_N: f64 = 0.25;
 
 /// Depth, contact force and tilt over time, and the wrench the wrist applies in the hole on
 /// Whitney's jamming diagram with its parallelogram at 1 mm and at the depth reached.

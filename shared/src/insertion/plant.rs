@@ -311,9 +311,10 @@ impl PegPlant {
         let r_tip = tip - com;
         let tip_vel = Vec2::new(self.v[0], self.v[1]) + perp(r_tip) * self.v[2];
         let p = &self.params;
-        let (force, moment_com) = self.last_contact;
-        let moment = moment_com + cross(com - tip, force);
-        let (applied_force, applied_com) = self.last_wrist;
+        // A wrench (force, moment about the centre of mass) with its moment taken about the tip.
+        let about_tip = |(f, m): (Vec2, f64)| (f, m + cross(com - tip, f));
+        let (force, moment) = about_tip(self.last_contact);
+        let (applied_force, applied_moment) = about_tip(self.last_wrist);
         let (state, edge) = classify(found, &self.normal_n, tip_vel.y, p);
         PegTruth {
             pose: tip_pose,
@@ -321,7 +322,7 @@ impl PegPlant {
             force,
             moment_about_tip: moment,
             applied_force,
-            applied_moment_about_tip: applied_com + cross(com - tip, applied_force),
+            applied_moment_about_tip: applied_moment,
             contacts: count,
             state,
             depth_m: -tip.y,

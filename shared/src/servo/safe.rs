@@ -91,14 +91,9 @@ impl ServoCore {
             .unwrap_or(self.dither.velocity_amplitude());
         self.hybrid.set_velocity(0.0);
         if matches!(self.mode, ServoMode::Stopping | ServoMode::Probing) {
-            // The strokes cannot be measured without force data: abandon them, keeping the
-            // set-point where the stroke had taken it.
+            // The strokes cannot be measured without force data: abandon them.
             self.counters.aborted += 1;
-            if self.mode == ServoMode::Probing {
-                self.hybrid.absorb_offset(self.last_stroke.displacement);
-            }
-            self.probe.reset();
-            self.reprobe = false;
+            self.abandon_probe();
         }
         if self.mode != ServoMode::AwaitingEstimate {
             self.mode = ServoMode::Resuming;

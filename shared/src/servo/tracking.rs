@@ -162,19 +162,19 @@ impl ServoCore {
                 self.counters.estimates += 1;
                 let t = self.params.tracking;
                 let angle = e.tangent_angle_rad;
+                let turn = self
+                    .last_estimate
+                    .map(|(prev, at)| (crate::math::wrap_angle(angle - prev), at));
+                let turned =
+                    turn.is_some_and(|(dth, _)| dth.abs() > t.corner_angle_deg.to_radians());
                 // The estimate before this one turned a corner: the pair straddles it, and
                 // implies no curvature.
                 let after_corner = self.confirm_corner;
-                self.confirm_corner = t.corner_confirm_m > 0.0
-                    && self.last_estimate.is_some_and(|(prev, _)| {
-                        crate::math::wrap_angle(angle - prev).abs()
-                            > t.corner_angle_deg.to_radians()
-                    });
-                self.track.curvature_per_m = match self.last_estimate {
-                    Some((prev, at)) if t.curvature_feedforward => {
+                self.confirm_corner = t.corner_confirm_m > 0.0 && turned;
+                self.track.curvature_per_m = match turn {
+                    Some((dth, at)) if t.curvature_feedforward => {
                         let ds = self.track.odometer_total_m - at;
-                        let dth = crate::math::wrap_angle(angle - prev);
-                        let corner = dth.abs() > t.corner_angle_deg.to_radians()
+                        let corner = turned
                             || after_corner
                             || self.last_trigger == Some(Trigger::Force)
                             || ds <= 1e-3
@@ -270,15 +270,23 @@ impl ServoCore {
         }
         self.contact_lost_ticks = 0;
         self.counters.contact_losses += 1;
-        self.hybrid.absorb_offset(self.last_stroke.displacement);
-        self.last_stroke = crate::hybrid::SetpointOffset::default();
-        self.probe.reset();
-        self.reprobe = false;
+        self.abandon_probe();
         self.track.odometer_m = (t.min_travel_m - t.contact_lost_travel_m).min(0.0);
         self.track.drift_rad = 0.0;
         self.force_armed = false;
         self.mode = ServoMode::Track;
         self.hybrid.set_velocity(self.track.resume_velocity_m_per_s);
+    }
+
+    /// Abandons a probe run: a stroke in progress becomes part of the set-point (the arm
+    /// stays where the stroke took it), and the run's record is dropped.
+    pub(super) fn abandon_probe(&mut self) {
+        if self.mode == ServoMode::Probing {
+            self.hybrid.absorb_offset(self.last_stroke.displacement);
+        }
+        self.last_stroke = crate::hybrid::SetpointOffset::default();
+        self.probe.reset();
+        self.reprobe = false;
     }
 
     pub(super) fn check_triggers(&mut self, dt: f64, normal: f64) {
