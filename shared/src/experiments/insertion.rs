@@ -4,88 +4,13 @@
 
 use super::*;
 use crate::error::ConfigError;
-use crate::insertion::controller::{Controller, ControllerParams, Input, Method, Phase};
-use crate::insertion::estimate::{Estimator, class};
-use crate::insertion::plant::{ContactState, PegParams, PegPlant};
+use crate::insertion::monitor::{InsertionMonitor, PegTick};
 use crate::insertion::whitney::Fit;
 use crate::sensor::{SensorModel, SensorParams, Wrench};
-use rand_chacha::ChaCha8Rng;
-use rand_chacha::rand_core::SeedableRng;
-use rand_distr::{Distribution, Uniform};
 use serde::Serialize;
 
-/// The insertion experiment's own settings (`afs experiment insertion --clearance ...`).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct InsertionOptions {
-    /// Clearance ratio c = (D − d)/D.
-    pub clearance_ratio: f64,
-    /// Friction coefficient μ at every contact.
-    pub mu: f64,
-    /// Chamfer leg (mm); 0: none.
-    pub chamfer_mm: f64,
-    /// Initial lateral error (mm); None: uniform in ±2 mm per seed.
-    pub lateral_mm: Option<f64>,
-    /// Initial angle error (deg); None: uniform in ±2° per seed.
-    pub angle_deg: Option<f64>,
-    /// The controller.
-    pub method: Method,
-    /// Time allowed (s).
-    pub time_limit_s: f64,
-    /// The force limit, as a multiple of the commanded insertion force.
-    pub force_limit_factor: f64,
-}
-
-impl Default for InsertionOptions {
-    fn default() -> Self {
-        Self {
-            clearance_ratio: 0.002,
-            mu: 0.3,
-            chamfer_mm: 0.5,
-            lateral_mm: None,
-            angle_deg: None,
-            method: Method::Dither,
-            time_limit_s: 10.0,
-            force_limit_factor: 3.0,
-        }
-    }
-}
-
-impl InsertionOptions {
-    /// Checks the settings.
-    pub fn validate(&self) -> Result<(), ConfigError> {
-        // (name, value, upper bound, whether 0 is allowed): a chamfer may be 0 (a sharp edge);
-        // a clearance, a friction or a time may not.
-        let rules = [
-            ("insertion.clearance", self.clearance_ratio, 0.5, false),
-            ("insertion.mu", self.mu, 2.0, false),
-            ("insertion.chamfer_mm", self.chamfer_mm, 3.0, true),
-            ("insertion.time_limit_s", self.time_limit_s, 600.0, false),
-        ];
-        for (name, v, max, zero_ok) in rules {
-            if !(v.is_finite() && (v > 0.0 || zero_ok && v == 0.0) && v < max) {
-                let zero = if zero_ok { " or 0" } else { "" };
-                return Err(ConfigError::rule(
-                    name,
-                    format!("is {v}; it must be in (0, {max}){zero}"),
-                ));
-            }
-        }
-        for (name, v, limit) in [
-            ("insertion.lateral_mm", self.lateral_mm, 4.0),
-            ("insertion.angle_deg", self.angle_deg, 10.0),
-        ] {
-            if let Some(v) = v
-                && !(v.is_finite() && v.abs() <= limit)
-            {
-                return Err(ConfigError::rule(
-                    name,
-                    format!("is {v}; it must be within ±{limit}"),
-                ));
-            }
-        }
-        Ok(())
-    }
-}
+pub use crate::insertion::monitor::WHITNEY_LEAST_FZ_N;
+pub use crate::insertion::rig::{InsertionOptions, InsertionRig};
 
 /// Summary of one insertion.
 #[derive(Debug, Clone, Serialize)]
@@ -131,143 +56,60 @@ pub struct InsertionSummary {
     pub inside_parallelogram: Option<f64>,
 }
 
-/// The initial errors of `seed` (uniform ±2 mm, ±2°) unless set.
-fn initial_errors(o: &InsertionOptions, seed: u64) -> (f64, f64) {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x1a5e_7100);
-    let u = Uniform::new_inclusive(-1.0f64, 1.0).expect("valid range");
-    let (a, b) = (u.sample(&mut rng), u.sample(&mut rng));
-    (
-        o.lateral_mm.unwrap_or(2.0 * a) * 1e-3,
-        o.angle_deg.unwrap_or(2.0 * b).to_radians(),
-    )
-}
-
 /// One insertion on the built-in plant (docs/insertion.md): the peg starts 1 mm above the
 /// face, offset and tilted by the seed's errors, and the controller inserts it 15 mm.
 pub fn insertion(opts: &Options) -> Result<Outcome<InsertionSummary>, ExperimentError> {
     let o = opts.insertion;
-    let params = peg_params(opts)?;
-    let g = params.geometry;
-    let fit = Fit {
-        peg_width_m: g.peg_width_m,
-        clearance_ratio: g.clearance_ratio,
-        friction: o.mu,
-    };
-    let (lateral, angle) = initial_errors(&o, opts.seed);
-    let start = [lateral, 1e-3, angle];
-    let mut plant = PegPlant::new(params, start);
-    let sensor_params = SensorParams {
-        noise_force_n: 0.02,
-        ..opts.base.sensor
-    };
+    check_world(opts)?;
+    let fit = o.fit();
+    let mut rig = InsertionRig::new(&o, opts.seed)?;
+    let sensor_params = insertion_sensor(&opts.base.sensor);
     let mut sensor = SensorModel::new(sensor_params, opts.seed);
     let tare = crate::sim::tare(&mut sensor);
-    // The controller knows μ as friction identification gives it.
-    let cp = ControllerParams {
-        mu: o.mu,
-        ..ControllerParams::default()
-    };
-    let chamfer_depth = g.chamfer_m / g.chamfer_angle_deg.to_radians().tan().max(1e-9);
-    let mut ctl = Controller::new(cp, o.method, params.wrist_stiffness, start, chamfer_depth);
     let dt = 1e-4;
-    let limit = o.force_limit_factor * cp.insertion_force_n;
-    let (mut peak, mut depth, mut jammed, mut wedged) = (0.0f64, 0.0f64, 0u64, 0u64);
-    let mut starts = [None; 4];
-    let (mut trace, mut whitney, mut inside) = (Vec::new(), Vec::new(), 0usize);
+    let mut monitor = InsertionMonitor::new(dt, fit, o.force_limit_n());
     let (mut reading, mut next_sample, period) =
         (Wrench::default(), 0.0, 1.0 / sensor_params.rate_hz);
-    let mut t = 0.0;
-    let mut contact_t = None;
-    let mut estimator = Estimator::new(0.0, chamfer_depth, g.peg_width_m, o.mu);
-    let (mut states, mut changes, mut prev_tip_y) = (Vec::new(), Vec::new(), start[1]);
-    while t < o.time_limit_s {
-        let truth = *plant.truth();
-        while next_sample <= t {
-            reading = sensor
-                .sample(Wrench {
-                    force: truth.force,
-                    torque: truth.moment_about_tip,
-                })
-                .wrench;
+    while rig.time_s() < o.time_limit_s {
+        while next_sample <= rig.time_s() {
+            reading = sensor.sample(rig.sensor_wrench()).wrench;
             next_sample += period;
         }
-        let inp = Input {
-            force: [
-                reading.force.x - tare.force.x,
-                reading.force.y - tare.force.y,
-            ],
-            moment_nm: reading.torque - tare.torque,
-            tip: truth.pose,
-        };
-        let before = ctl.phase();
-        let speed = (truth.pose[1] - prev_tip_y) / -dt;
-        prev_tip_y = truth.pose[1];
-        let truth_class = class(truth.state);
-        if states
-            .last()
-            .is_none_or(|s: &(f64, ContactState, ContactState)| s.1 != truth_class)
-        {
-            changes.push(t);
-        }
-        states.push((t, truth_class, class(estimator.update(&inp, speed, dt))));
-        let (target, rate) = ctl.step(&inp, dt);
-        if ctl.phase() != before {
-            let k = match ctl.phase() {
-                Phase::Find => 0,
-                Phase::Align => 1,
-                Phase::Insert => 2,
-                _ => 3,
-            };
-            starts[k] = Some(t);
-            if k == 0 {
-                contact_t = Some(t);
-            }
-        }
-        plant.step(target, rate, dt);
-        t += dt;
-        let tr = plant.truth();
-        peak = peak.max(tr.force.norm());
-        depth = depth.max(tr.depth_m);
-        match tr.state {
-            ContactState::Jammed => jammed += 1,
-            ContactState::Wedged => wedged += 1,
-            _ => {}
-        }
-        if ((t / dt).round() as u64).is_multiple_of(50) {
-            // The wrench the wrist applies, on Whitney's axes, while the peg is pressed in the hole.
-            let fz = -tr.applied_force.y;
-            if tr.depth_m > 0.0 && fz > WHITNEY_LEAST_FZ_N {
-                let r = 0.5 * g.peg_width_m;
-                let w = [
-                    tr.applied_force.x / fz,
-                    tr.applied_moment_about_tip / (r * fz),
-                ];
-                inside += usize::from(fit.slides(tr.depth_m, w[0], w[1]));
-                whitney.push(w);
-            }
-            trace.push([
-                t,
-                tr.depth_m * 1e3,
-                tr.force.x,
-                tr.force.y,
-                tr.pose[2].to_degrees(),
-            ]);
-        }
-        if ctl.phase() == Phase::Done || peak > limit {
+        rig.step(
+            Some(Wrench {
+                force: reading.force - tare.force,
+                torque: reading.torque - tare.torque,
+            }),
+            dt,
+        );
+        monitor.push(&PegTick {
+            t: rig.time_s(),
+            phase: rig.phase(),
+            estimated: rig.estimated(),
+            truth: *rig.truth(),
+        });
+        if rig.finished() {
             break;
         }
     }
-    let inserted = ctl.phase() == Phase::Done && peak <= limit;
-    let time = match (inserted, contact_t, starts[3]) {
-        (true, Some(a), Some(b)) => Some(b - a),
-        _ => None,
-    };
-    let (right, counted) = classification(&states, &changes, TRANSITION_S);
-    let accuracy = right as f64 / counted.max(1) as f64;
-    let checks = insertion_checks(&o, inserted, peak / cp.insertion_force_n, accuracy, time);
-    let figure = insertion_figure(&trace, &whitney, &fit, depth);
+    let run = monitor.report();
+    let (lateral, angle) = rig.initial_errors();
+    let force = o.controller_params().insertion_force_n;
+    let checks = insertion_checks(
+        &o,
+        run.inserted,
+        run.peak_force_n / force,
+        run.state_classification_accuracy,
+        run.insertion_time_s,
+    );
+    let figure = insertion_figure(
+        monitor.trace(),
+        monitor.whitney(),
+        &fit,
+        run.depth_mm * 1e-3,
+    );
     Ok(Outcome {
-        simulated_s: t,
+        simulated_s: rig.time_s(),
         summary: InsertionSummary {
             method: o.method.name(),
             clearance_ratio: o.clearance_ratio,
@@ -276,41 +118,42 @@ pub fn insertion(opts: &Options) -> Result<Outcome<InsertionSummary>, Experiment
             lateral_error_mm: lateral * 1e3,
             angle_error_deg: angle.to_degrees(),
             wedging_angle_deg: fit.wedging_angle_rad().to_degrees(),
-            inserted,
-            insertion_time_s: time,
-            peak_force_n: peak,
-            depth_mm: depth * 1e3,
-            jammed_ticks: jammed,
-            wedged_ticks: wedged,
-            phase_starts_s: starts,
-            state_classification_accuracy: accuracy,
-            classified_ticks: counted,
-            jamming_diagram_samples: whitney.len(),
-            inside_parallelogram: (!whitney.is_empty())
-                .then(|| inside as f64 / whitney.len() as f64),
+            inserted: run.inserted,
+            insertion_time_s: run.insertion_time_s,
+            peak_force_n: run.peak_force_n,
+            depth_mm: run.depth_mm,
+            jammed_ticks: run.jammed_ticks,
+            wedged_ticks: run.wedged_ticks,
+            phase_starts_s: run.phase_starts_s,
+            state_classification_accuracy: run.state_classification_accuracy,
+            classified_ticks: run.classified_ticks,
+            jamming_diagram_samples: run.jamming_diagram_samples,
+            inside_parallelogram: run.inside_parallelogram,
         },
         checks,
         figure,
     })
 }
 
-/// The set-up of `opts`, checked: the peg and hole with the options' fit and chamfer.
-fn peg_params(opts: &Options) -> Result<PegParams, ExperimentError> {
-    let o = opts.insertion;
-    o.validate()?;
+/// The wrist sensor of an insertion: the set-up's, with the force noise of a small
+/// force/torque sensor (0.02 N).
+pub fn insertion_sensor(base: &SensorParams) -> SensorParams {
+    SensorParams {
+        noise_force_n: 0.02,
+        ..*base
+    }
+}
+
+/// Insertion runs on the built-in plant only (the wrist is not in MuJoCo's model yet).
+fn check_world(opts: &Options) -> Result<(), ConfigError> {
     if opts.base.world.kind != crate::world::WorldKind::Builtin {
         return Err(ConfigError::rule(
             "world.kind",
             "is `mujoco`; insertion runs on the built-in plant only: the wrist is not in \
              MuJoCo's generated model yet (docs/insertion.md); run it without --plant",
-        )
-        .into());
+        ));
     }
-    let mut params = PegParams::default();
-    params.geometry.clearance_ratio = o.clearance_ratio;
-    params.geometry.chamfer_m = o.chamfer_mm * 1e-3;
-    params.friction = params.friction.scaled(o.mu / params.mu());
-    Ok(params)
+    Ok(())
 }
 
 /// The insertion's checks.
@@ -349,35 +192,6 @@ fn insertion_checks(
         .target(),
     ]
 }
-
-/// Ticks on either side of a change of the true contact state left out of the accuracy (s).
-const TRANSITION_S: f64 = 0.01;
-
-/// How many of `states` (time, true class, estimated class) were right, and how many were
-/// counted: those farther than `window` from every time in `changes`.
-fn classification(
-    states: &[(f64, ContactState, ContactState)],
-    changes: &[f64],
-    window: f64,
-) -> (usize, usize) {
-    let (mut right, mut counted, mut k) = (0, 0, 0);
-    for &(t, truth, est) in states {
-        while k + 1 < changes.len() && changes[k + 1] <= t {
-            k += 1;
-        }
-        let near = |i: usize| changes.get(i).is_some_and(|c| (c - t).abs() < window);
-        if near(k) || near(k + 1) {
-            continue;
-        }
-        counted += 1;
-        right += usize::from(truth == est);
-    }
-    (right, counted)
-}
-
-/// The jamming diagram shows the applied wrench only while the wrist presses the peg in with at
-/// least this force (N): below it, F_x/F_z and M/(r F_z) divide by next to nothing.
-pub const WHITNEY_LEAST_FZ_N: f64 = 0.25;
 
 /// Depth, contact force and tilt over time, and the wrench the wrist applies in the hole on
 /// Whitney's jamming diagram with its parallelogram at 1 mm and at the depth reached.

@@ -48,7 +48,7 @@ impl Method {
 }
 
 /// The controller's phase.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Phase {
     /// Moving down to the part.
@@ -178,6 +178,25 @@ pub struct Input {
     pub tip: [f64; 3],
 }
 
+/// What changes in a [`Controller`] as it runs (the rest is its settings).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ControllerState {
+    /// The phase.
+    pub phase: Phase,
+    /// The commanded pose without the dither.
+    pub target: [f64; 3],
+    /// Where the lateral search is centred (m).
+    pub start_x: f64,
+    /// Time since the start (s).
+    pub t: f64,
+    /// Time in the phase (s).
+    pub phase_t: f64,
+    /// How long the peg has stayed aligned (s).
+    pub aligned_s: f64,
+    /// How long the contact force has been below the loss threshold (s).
+    pub lost_s: f64,
+}
+
 /// The controller.
 #[derive(Debug, Clone)]
 pub struct Controller {
@@ -229,6 +248,36 @@ impl Controller {
     /// The phase.
     pub fn phase(&self) -> Phase {
         self.phase
+    }
+
+    /// The commanded tip pose without the dither (m, m, rad): where the wrist holds the peg
+    /// when the force data fails.
+    pub fn target(&self) -> [f64; 3] {
+        self.target
+    }
+
+    /// What changes as it runs, for a restarted servo ([`Controller::restore`]).
+    pub fn state(&self) -> ControllerState {
+        ControllerState {
+            phase: self.phase,
+            target: self.target,
+            start_x: self.start_x,
+            t: self.t,
+            phase_t: self.phase_t,
+            aligned_s: self.aligned_s,
+            lost_s: self.lost_s,
+        }
+    }
+
+    /// Carries on from `s`.
+    pub fn restore(&mut self, s: &ControllerState) {
+        self.phase = s.phase;
+        self.target = s.target;
+        self.start_x = s.start_x;
+        self.t = s.t;
+        self.phase_t = s.phase_t;
+        self.aligned_s = s.aligned_s;
+        self.lost_s = s.lost_s;
     }
 
     /// Depth of the tip below the face (m).

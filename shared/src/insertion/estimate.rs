@@ -61,6 +61,16 @@ impl Estimator {
         }
     }
 
+    /// The filtered force (N) and moment (N·m): its state.
+    pub fn filtered(&self) -> ([f64; 2], f64) {
+        self.filtered
+    }
+
+    /// Carries on from a filtered force and moment ([`Estimator::filtered`]).
+    pub fn restore(&mut self, filtered: ([f64; 2], f64)) {
+        self.filtered = filtered;
+    }
+
     /// Low-passes one reading (the sensor's moment noise is σ = 0.5 mN·m, a tenth of a newton
     /// at the peg's half-width) and classifies the filtered one.
     pub fn update(&mut self, inp: &Input, speed_m_per_s: f64, dt: f64) -> ContactState {

@@ -1,12 +1,15 @@
 //! Force-guided insertion (docs/insertion.md): a rectangular peg held by a compliant wrist,
 //! a hole with an optional chamfer ([`geometry`], [`plant`]), Whitney's jamming and wedging
 //! conditions ([`whitney`]), the insertion controller and its baselines ([`controller`]), the
-//! contact state as the controller can know it ([`estimate`]), and the arm with a wrist joint
+//! contact state as the controller can know it ([`estimate`]), the three stepped together as a
+//! servo runs them ([`rig`]) and measured ([`monitor`]), and the arm with a wrist joint
 //! ([`scara`]; not yet driven).
 
 pub mod controller;
 pub mod estimate;
 pub mod geometry;
+pub mod monitor;
 pub mod plant;
+pub mod rig;
 pub mod scara;
 pub mod whitney;

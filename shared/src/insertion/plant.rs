@@ -123,10 +123,31 @@ pub struct PegTruth {
     pub edge_along_peg_m: Option<f64>,
 }
 
+/// The plant's whole state ([`PegPlant::state`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PegPlantState {
+    /// Centre of mass and θ.
+    pub q: [f64; 3],
+    /// Their rates.
+    pub v: [f64; 3],
+    /// Each contact slot's bristle deflection (m).
+    pub deflection_m: [f64; SLOTS],
+    /// The feature each slot touches.
+    pub touching: [Option<(Feature, i8)>; SLOTS],
+    /// Each slot's normal force in the last sub-step (N).
+    pub normal_n: [f64; SLOTS],
+    /// The contact force and its moment about the centre of mass, last sub-step.
+    pub last_contact: (Vec2, f64),
+    /// The wrist's, last sub-step.
+    pub last_wrist: (Vec2, f64),
+    /// The truth of the last step.
+    pub truth: PegTruth,
+}
+
 /// Speed below which a two-point contact counts as stuck (m/s).
 const STUCK_M_PER_S: f64 = 1e-5;
 /// Slots: the peg's four corners, then the part's corners.
-const SLOTS: usize = 4 + MAX_CORNERS;
+pub const SLOTS: usize = 4 + MAX_CORNERS;
 
 /// The peg and the part.
 #[derive(Debug, Clone)]
@@ -194,6 +215,35 @@ impl PegPlant {
         let (axis, _) = peg_axes(self.q[2]);
         let tip = Vec2::new(self.q[0], self.q[1]) - axis * self.params.com_above_tip_m;
         [tip.x, tip.y, self.q[2]]
+    }
+
+    /// The whole state, for a restarted servo to resume ([`PegPlant::restore`]).
+    pub fn state(&self) -> PegPlantState {
+        PegPlantState {
+            q: self.q,
+            v: self.v,
+            deflection_m: self.bristles.map(|b| b.deflection_m),
+            touching: self.touching,
+            normal_n: self.normal_n,
+            last_contact: self.last_contact,
+            last_wrist: self.last_wrist,
+            truth: self.truth,
+        }
+    }
+
+    /// Carries on from `s` (taken by [`PegPlant::state`] of a plant with the same parameters):
+    /// the next step is the one that plant would have taken.
+    pub fn restore(&mut self, s: &PegPlantState) {
+        self.q = s.q;
+        self.v = s.v;
+        for (b, d) in self.bristles.iter_mut().zip(s.deflection_m) {
+            b.deflection_m = d;
+        }
+        self.touching = s.touching;
+        self.normal_n = s.normal_n;
+        self.last_contact = s.last_contact;
+        self.last_wrist = s.last_wrist;
+        self.truth = s.truth;
     }
 
     /// Advances by `dt` with the wrist commanding the tip to `target` (x, y, θ) at `target_vel`.

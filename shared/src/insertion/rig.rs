@@ -1,0 +1,343 @@
+//! One insertion as a servo runs it (docs/insertion.md, *On the stack*): the peg's plant, the
+//! insertion controller and the contact-state estimator, stepped a tick at a time from the
+//! wrist sensor's tared readings. One piece of code for `afs experiment insertion`, the
+//! `insertion` scenario's lockstep reference and the servo board, so the three run the same
+//! insertion; its whole state goes into the world snapshot for a restarted servo.
+
+use super::controller::{Controller, ControllerParams, ControllerState, Input, Method, Phase};
+use super::estimate::Estimator;
+use super::plant::{ContactState, PegParams, PegPlant, PegPlantState, PegTruth};
+use super::whitney::Fit;
+use crate::error::ConfigError;
+use crate::sensor::Wrench;
+use rand_chacha::ChaCha8Rng;
+use rand_chacha::rand_core::SeedableRng;
+use rand_distr::{Distribution, Uniform};
+use serde::Serialize;
+
+/// The insertion's settings (`afs experiment insertion --clearance ...`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct InsertionOptions {
+    /// Clearance ratio c = (D − d)/D.
+    pub clearance_ratio: f64,
+    /// Friction coefficient μ at every contact.
+    pub mu: f64,
+    /// Chamfer leg (mm); 0: none.
+    pub chamfer_mm: f64,
+    /// Initial lateral error (mm); None: uniform in ±2 mm per seed.
+    pub lateral_mm: Option<f64>,
+    /// Initial angle error (deg); None: uniform in ±2° per seed.
+    pub angle_deg: Option<f64>,
+    /// The controller.
+    pub method: Method,
+    /// Time allowed (s).
+    pub time_limit_s: f64,
+    /// The force limit, as a multiple of the commanded insertion force.
+    pub force_limit_factor: f64,
+}
+
+impl Default for InsertionOptions {
+    fn default() -> Self {
+        Self {
+            clearance_ratio: 0.002,
+            mu: 0.3,
+            chamfer_mm: 0.5,
+            lateral_mm: None,
+            angle_deg: None,
+            method: Method::Dither,
+            time_limit_s: 10.0,
+            force_limit_factor: 3.0,
+        }
+    }
+}
+
+impl InsertionOptions {
+    /// Checks the settings.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        // (name, value, upper bound, whether 0 is allowed): a chamfer may be 0 (a sharp edge);
+        // a clearance, a friction or a time may not.
+        let rules = [
+            ("insertion.clearance", self.clearance_ratio, 0.5, false),
+            ("insertion.mu", self.mu, 2.0, false),
+            ("insertion.chamfer_mm", self.chamfer_mm, 3.0, true),
+            ("insertion.time_limit_s", self.time_limit_s, 600.0, false),
+        ];
+        for (name, v, max, zero_ok) in rules {
+            if !(v.is_finite() && (v > 0.0 || zero_ok && v == 0.0) && v < max) {
+                let zero = if zero_ok { " or 0" } else { "" };
+                return Err(ConfigError::rule(
+                    name,
+                    format!("is {v}; it must be in (0, {max}){zero}"),
+                ));
+            }
+        }
+        for (name, v, limit) in [
+            ("insertion.lateral_mm", self.lateral_mm, 4.0),
+            ("insertion.angle_deg", self.angle_deg, 10.0),
+        ] {
+            if let Some(v) = v
+                && !(v.is_finite() && v.abs() <= limit)
+            {
+                return Err(ConfigError::rule(
+                    name,
+                    format!("is {v}; it must be within ±{limit}"),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The peg and hole with these settings' fit, chamfer and friction.
+    pub fn peg_params(&self) -> PegParams {
+        let mut params = PegParams::default();
+        params.geometry.clearance_ratio = self.clearance_ratio;
+        params.geometry.chamfer_m = self.chamfer_mm * 1e-3;
+        params.friction = params.friction.scaled(self.mu / params.mu());
+        params
+    }
+
+    /// The controller's settings: it knows μ as friction identification gives it.
+    pub fn controller_params(&self) -> ControllerParams {
+        ControllerParams {
+            mu: self.mu,
+            ..ControllerParams::default()
+        }
+    }
+
+    /// The contact force that ends an insertion as failed (N).
+    pub fn force_limit_n(&self) -> f64 {
+        self.force_limit_factor * self.controller_params().insertion_force_n
+    }
+
+    /// Whitney's fit of the peg in the hole.
+    pub fn fit(&self) -> Fit {
+        let g = self.peg_params().geometry;
+        Fit {
+            peg_width_m: g.peg_width_m,
+            clearance_ratio: g.clearance_ratio,
+            friction: self.mu,
+        }
+    }
+
+    /// The initial errors of `seed` (m, rad): uniform ±2 mm, ±2° unless set.
+    pub fn initial_errors(&self, seed: u64) -> (f64, f64) {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x1a5e_7100);
+        let u = Uniform::new_inclusive(-1.0f64, 1.0).expect("valid range");
+        let (a, b) = (u.sample(&mut rng), u.sample(&mut rng));
+        (
+            self.lateral_mm.unwrap_or(2.0 * a) * 1e-3,
+            self.angle_deg.unwrap_or(2.0 * b).to_radians(),
+        )
+    }
+}
+
+/// The rig's whole state ([`InsertionRig::state`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RigState {
+    /// Time since the start (s).
+    pub time_s: f64,
+    /// The plant.
+    pub plant: PegPlantState,
+    /// The controller.
+    pub controller: ControllerState,
+    /// The estimator's filtered force (N) and moment (N·m).
+    pub filtered: ([f64; 2], f64),
+    /// The last estimated contact state.
+    pub estimated: ContactState,
+    /// The tip's height at the last tick (m), for the insertion speed.
+    pub prev_tip_y_m: f64,
+    /// The largest contact force so far (N).
+    pub peak_force_n: f64,
+}
+
+/// The plant, the controller and the estimator of one insertion.
+#[derive(Debug, Clone)]
+pub struct InsertionRig {
+    plant: PegPlant,
+    ctl: Controller,
+    estimator: Estimator,
+    estimated: ContactState,
+    prev_tip_y_m: f64,
+    time_s: f64,
+    peak_force_n: f64,
+    limit_n: f64,
+    initial: (f64, f64),
+}
+
+impl InsertionRig {
+    /// The insertion of `o` at `seed`: the peg 1 mm above the face, offset and tilted by the
+    /// seed's initial errors.
+    pub fn new(o: &InsertionOptions, seed: u64) -> Result<Self, ConfigError> {
+        o.validate()?;
+        let params = o.peg_params();
+        let g = params.geometry;
+        let (lateral, angle) = o.initial_errors(seed);
+        let start = [lateral, 1e-3, angle];
+        let chamfer_depth = g.chamfer_m / g.chamfer_angle_deg.to_radians().tan().max(1e-9);
+        Ok(Self {
+            plant: PegPlant::new(params, start),
+            ctl: Controller::new(
+                o.controller_params(),
+                o.method,
+                params.wrist_stiffness,
+                start,
+                chamfer_depth,
+            ),
+            estimator: Estimator::new(0.0, chamfer_depth, g.peg_width_m, o.mu),
+            estimated: ContactState::Free,
+            prev_tip_y_m: start[1],
+            time_s: 0.0,
+            peak_force_n: 0.0,
+            limit_n: o.force_limit_n(),
+            initial: (lateral, angle),
+        })
+    }
+
+    /// One tick of `dt`: with a tared reading of the wrist's force/torque sensor (force on the
+    /// peg, moment about the tip), the estimator and the controller step and the wrist follows
+    /// the controller's pose; without one (no valid force data: the servo's safe state) the
+    /// controller stands still and the wrist holds its pose.
+    pub fn step(&mut self, reading: Option<Wrench>, dt: f64) {
+        let tip = self.plant.truth().pose;
+        let speed = (tip[1] - self.prev_tip_y_m) / -dt;
+        self.prev_tip_y_m = tip[1];
+        let (target, rate) = match reading {
+            Some(w) => {
+                let inp = Input {
+                    force: [w.force.x, w.force.y],
+                    moment_nm: w.torque,
+                    tip,
+                };
+                self.estimated = self.estimator.update(&inp, speed, dt);
+                self.ctl.step(&inp, dt)
+            }
+            None => (self.ctl.target(), [0.0; 3]),
+        };
+        self.plant.step(target, rate, dt);
+        self.time_s += dt;
+        self.peak_force_n = self.peak_force_n.max(self.plant.truth().force.norm());
+    }
+
+    /// The truth of the last step.
+    pub fn truth(&self) -> &PegTruth {
+        self.plant.truth()
+    }
+
+    /// What the wrist's force/torque sensor feels: the contact force on the peg and its moment
+    /// about the tip.
+    pub fn sensor_wrench(&self) -> Wrench {
+        let t = self.plant.truth();
+        Wrench {
+            force: t.force,
+            torque: t.moment_about_tip,
+        }
+    }
+
+    /// The controller's phase.
+    pub fn phase(&self) -> Phase {
+        self.ctl.phase()
+    }
+
+    /// The estimated contact state of the last tick with force data.
+    pub fn estimated(&self) -> ContactState {
+        self.estimated
+    }
+
+    /// The commanded pose without the dither.
+    pub fn target(&self) -> [f64; 3] {
+        self.ctl.target()
+    }
+
+    /// Time since the start (s).
+    pub fn time_s(&self) -> f64 {
+        self.time_s
+    }
+
+    /// At depth, or stopped by the force limit.
+    pub fn finished(&self) -> bool {
+        self.phase() == Phase::Done || self.peak_force_n > self.limit_n
+    }
+
+    /// The seed's initial lateral (m) and angle (rad) errors.
+    pub fn initial_errors(&self) -> (f64, f64) {
+        self.initial
+    }
+
+    /// The whole state, for a restarted servo.
+    pub fn state(&self) -> RigState {
+        RigState {
+            time_s: self.time_s,
+            plant: self.plant.state(),
+            controller: self.ctl.state(),
+            filtered: self.estimator.filtered(),
+            estimated: self.estimated,
+            prev_tip_y_m: self.prev_tip_y_m,
+            peak_force_n: self.peak_force_n,
+        }
+    }
+
+    /// Carries on from `s`, taken from a rig built with the same options and seed.
+    pub fn restore(&mut self, s: &RigState) {
+        self.time_s = s.time_s;
+        self.plant.restore(&s.plant);
+        self.ctl.restore(&s.controller);
+        self.estimator.restore(s.filtered);
+        self.estimated = s.estimated;
+        self.prev_tip_y_m = s.prev_tip_y_m;
+        self.peak_force_n = s.peak_force_n;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::Vec2;
+
+    /// A rig restored from another's state mid-insertion carries on bit for bit as that one
+    /// does: what a restarted servo relies on.
+    #[test]
+    fn a_restored_rig_carries_on_exactly() {
+        let o = InsertionOptions::default();
+        let mut a = InsertionRig::new(&o, 3).unwrap();
+        let dt = 1e-4;
+        let reading = |r: &InsertionRig, k: u32| {
+            let mut w = r.sensor_wrench();
+            w.force += Vec2::new(0.01, -0.01) * f64::from(k % 7);
+            w
+        };
+        let mut k = 0;
+        while a.phase() != Phase::Insert {
+            a.step(Some(reading(&a, k)), dt);
+            k += 1;
+            assert!(a.time_s() < 10.0, "never reached the insert phase");
+        }
+        let mut b = InsertionRig::new(&o, 3).unwrap();
+        b.restore(&a.state());
+        for j in 0..2000 {
+            let valid = j % 300 > 10;
+            let (ra, rb) = (reading(&a, k + j), reading(&b, k + j));
+            a.step(valid.then_some(ra), dt);
+            b.step(valid.then_some(rb), dt);
+        }
+        assert_eq!(a.state(), b.state());
+        assert_eq!(a.truth(), b.truth());
+        // A fresh rig is elsewhere: the check can tell.
+        let fresh = InsertionRig::new(&o, 3).unwrap();
+        assert_ne!(fresh.state(), b.state());
+    }
+
+    /// Without force data the controller stands still and the wrist holds its pose.
+    #[test]
+    fn without_force_data_the_wrist_holds() {
+        let o = InsertionOptions::default();
+        let mut r = InsertionRig::new(&o, 1).unwrap();
+        let before = r.target();
+        for _ in 0..5000 {
+            r.step(None, 1e-4);
+        }
+        assert_eq!(r.target(), before);
+        assert_eq!(r.phase(), Phase::Approach);
+        let tip = r.truth().pose;
+        assert!((tip[1] - before[1]).abs() < 1e-6, "{tip:?} vs {before:?}");
+    }
+}
