@@ -363,6 +363,57 @@ fn servo_killed_or_frozen_resumes_the_world_and_its_controller() {
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
 }
 
+/// The servo killed, then frozen, during an insertion (seed 1: while the peg aligns in the
+/// hole at 1.7 s, and while it goes in at 3.6 s): each restarted servo resumes the rig from the
+/// world snapshot (plant, controller, estimator), every tick runs once, the peg is in within
+/// the force limit, and the reference agrees.
+#[test]
+fn a_servo_killed_mid_insertion_resumes_it() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let p = prefix("pin");
+    let (out, r) = chaos(
+        &p,
+        &[
+            "--scenario",
+            "insertion",
+            "--duration",
+            "6",
+            "--seed",
+            "1",
+            "--kills",
+            "2",
+            "--faults",
+            "kill-servo,freeze-servo",
+            "--in-turn",
+        ],
+    );
+    assert_correct(&out, &r);
+    assert_eq!(chaos_of(&r).injected, 2);
+    let run = r.stack.insertion.as_ref().expect("the insertion's figures");
+    let (find, done) = (run.phase_starts_s[0], run.phase_starts_s[3]);
+    for kind in ["kill-servo", "freeze-servo"] {
+        let f = faults_of(&r, kind);
+        assert_eq!(f.len(), 1, "{kind}");
+        assert_back_in_time(f[0]);
+        let at = f[0].injected_at_s;
+        assert!(
+            find.is_some_and(|t| t < at) && done.is_none_or(|t| at < t),
+            "{kind} at {at} s, not during the insertion {:?}",
+            run.phase_starts_s
+        );
+    }
+    assert_eq!(process(&r, "servo").restarts, 2);
+    assert!(run.inserted, "{run:?}");
+    assert!(r.agreement.agrees, "{:#?}", r.agreement);
+    let s = &r.samples;
+    assert_eq!(
+        (s.plant_received, s.plant_lost, s.reordered),
+        (60_001, 0, 0),
+        "{s:?}"
+    );
+    assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
+}
+
 /// 50 random SIGKILLs of servo, sensor and estimator in one simulated minute (the README's
 /// soak spreads them over two; here they come twice as densely, in half the CI time): every fault
 /// recovered, the world resumed each time (every tick once, none lost or reordered, at most

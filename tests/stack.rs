@@ -70,6 +70,45 @@ fn surface_tracking_across_processes_agrees_with_the_lockstep() {
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
 }
 
+/// `afs run --scenario insertion --json`: the servo runs the insertion's rig across the
+/// processes (the sensor board samples the peg's wrench on its own clock), the peg is in
+/// within the force limit, the figures agree with the lockstep reference (which is `afs
+/// experiment insertion` at the same seed), every tick of the 10-s time limit runs once, and
+/// nothing of the prefix is left.
+#[test]
+fn the_insertion_across_processes_agrees_with_the_lockstep() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let p = prefix("ins");
+    let out = afs()
+        .args(["run", "--scenario", "insertion", "--seed", "2"])
+        .args(["--json", "--quiet", "--prefix", &p])
+        .output()
+        .unwrap();
+    let r = run_report(&out);
+    assert!(
+        out.status.success() && r.passed,
+        "afs run failed: {}\n{}",
+        String::from_utf8_lossy(&out.stderr),
+        failed(&r)
+    );
+    assert!(r.agreement.agrees, "{:#?}", r.agreement);
+    let (stack, reference) = (
+        r.stack.insertion.as_ref().expect("the stack's insertion"),
+        r.reference.insertion.as_ref().expect("the reference's"),
+    );
+    assert!(
+        stack.inserted && reference.inserted,
+        "{stack:?} {reference:?}"
+    );
+    assert!(check(&r, "state_classification_accuracy").pass);
+    // It runs to the time limit, holding at depth once in; the insertion's figures stop at
+    // the depth.
+    assert_eq!((r.stack.ticks, stack.ticks), (100_000, 100_000));
+    assert!(stack.phase_starts_s[3].is_some_and(|t| t < 10.0));
+    assert_eq!((r.samples.plant_lost, r.samples.reordered), (0, 0));
+    assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
+}
+
 /// While a stack runs: the Python client decodes wrench samples with the documented layout;
 /// `afs status` lists the boards; a second stack on the same prefix is refused with a clear
 /// message while one on another prefix runs beside it. Its recording plots and exports.

@@ -43,7 +43,7 @@ struct RunArgs {
     /// built-in one (examples/stack.toml).
     #[arg(long)]
     config: Option<PathBuf>,
-    /// surface-tracking, corner, friction-suppression or friction-id.
+    /// surface-tracking, corner, friction-suppression, friction-id or insertion.
     #[arg(long)]
     scenario: Option<String>,
     /// Simulated seconds (0: the scenario's own length).

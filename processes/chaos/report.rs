@@ -132,8 +132,12 @@ pub struct ChaosReport {
 pub struct Measured<'a> {
     /// Safety figures.
     pub faults: &'a FaultFigures,
-    /// The preload (N).
+    /// The preload (N); in an insertion, the insertion force.
     pub preload_n: f64,
+    /// The largest normal force allowed, over the preload: in general and in the 0.5 s after
+    /// a servo restart (targets: 2 and 1.5 while tracking; an insertion's force limit, 3×
+    /// the insertion force, for both).
+    pub force_limits: (f64, f64),
     /// The servo was restarted.
     pub servo_restarted: bool,
 }
@@ -209,7 +213,7 @@ impl ChaosReport {
                 "normal_force_over_preload",
                 "largest true normal force / preload (outside 0.5 s after a servo restart)",
                 f.normal_force_max_over_preload,
-                2.0,
+                m.force_limits.0,
             )
             .target(),
         );
@@ -219,7 +223,7 @@ impl ChaosReport {
                     "normal_force_over_preload_after_servo_restart",
                     "largest true normal force / preload in the 0.5 s after a servo restart",
                     f.normal_force_max_after_servo_restart_n / m.preload_n,
-                    1.5,
+                    m.force_limits.1,
                 )
                 .target(),
             );

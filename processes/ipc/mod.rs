@@ -6,9 +6,9 @@
 //! stacks run side by side and a stack's leftovers are easy to find (`leftovers`).
 
 use afs_shared::msg::{
-    BoardStartup, FrictionReport, LoopStats, PlantSample, RotationRequestHeader, RotationResponse,
-    RotationSample, SensorStats, ServoBatch, ServoCommand, ServoSample, SupervisorStatus,
-    TangentRequestHeader, TangentResponse, WorldSnapshot, WrenchSample, service,
+    BoardStartup, FrictionReport, LoopStats, PegSample, PlantSample, RotationRequestHeader,
+    RotationResponse, RotationSample, SensorStats, ServoBatch, ServoCommand, ServoSample,
+    SupervisorStatus, TangentRequestHeader, TangentResponse, WorldSnapshot, WrenchSample, service,
 };
 use afs_shared::tangent::ProbeSample;
 use anyhow::{Context, Result, bail};
@@ -118,6 +118,11 @@ pub const TICK_STREAM: StreamSettings = StreamSettings {
     publishers: 1,
     nodes: 8,
 };
+
+/// The insertion's stream (`insertion` scenario).
+pub fn peg(node: &Node<Svc>) -> Result<publish_subscribe::PortFactory<Svc, PegSample, ()>> {
+    stream(node, service::PEG, TICK_STREAM)
+}
 
 /// The wrench stream. No history: a new subscriber waits at most one sensor period, and keeping
 /// one costs every send (≈ 60 ns of a 0.75 µs hop, `afs bench hop`). Three publishers: the

@@ -83,7 +83,11 @@ pub(super) fn run_checks(i: &Inputs<'_>) -> Vec<Check> {
         checks.extend(
             c.checks(&Measured {
                 faults: i.faults,
-                preload_n: i.scenario.cfg.servo.hybrid.preload_n,
+                preload_n: super::watch::nominal_force_n(i.scenario),
+                force_limits: i
+                    .scenario
+                    .insertion
+                    .map_or((2.0, 1.5), |o| (o.force_limit_factor, o.force_limit_factor)),
                 servo_restarted: i
                     .procs
                     .iter()
@@ -130,5 +134,38 @@ fn scenario_checks(i: &Inputs<'_>, finished: bool) -> Vec<Check> {
             )]
         }
         ScenarioKind::FrictionId => Vec::new(),
+        ScenarioKind::Insertion => insertion_checks(i, finished),
     }
+}
+
+/// The insertion's own criteria (those of `afs experiment insertion`): in, within the force
+/// limit, the contact state estimated right.
+fn insertion_checks(i: &Inputs<'_>, finished: bool) -> Vec<Check> {
+    let (Some(run), Some(o), true) = (&i.stack.insertion, &i.scenario.insertion, finished) else {
+        return Vec::new();
+    };
+    // A run shorter than the time limit may end before the depth: in, or not yet over.
+    let whole = i.duration >= i.scenario.natural_duration_s;
+    let done = run.inserted || (!whole && run.peak_force_n <= o.force_limit_n());
+    vec![
+        Check::at_least(
+            "inserted",
+            "depth reached in time, force in limit (1 = yes; a run shorter than the time \
+             limit: not failed yet)",
+            f64::from(u8::from(done)),
+            1.0,
+        ),
+        Check::at_most(
+            "peak_force_over_insertion_force",
+            "largest contact force / insertion force",
+            run.peak_force_n / o.controller_params().insertion_force_n,
+            o.force_limit_factor,
+        ),
+        Check::at_least(
+            "state_classification_accuracy",
+            "contact states estimated right, outside 10 ms of a transition",
+            run.state_classification_accuracy,
+            0.95,
+        ),
+    ]
 }

@@ -131,7 +131,7 @@ impl Setup {
     pub(super) fn supervisor(&mut self, opts: &RunOptions) -> Result<Supervisor> {
         let stack = &self.stack;
         let node = self.node.as_ref().context("the run's node is released")?;
-        let ports = Ports::open(node)?;
+        let ports = Ports::open(node, self.scenario.insertion.is_some())?;
         std::fs::create_dir_all(&self.dir)
             .with_context(|| format!("creating {}", self.dir.display()))?;
         let sim_file = match &stack.sim {

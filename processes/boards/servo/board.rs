@@ -8,6 +8,7 @@ use super::timing::{Timing, publish_stats};
 use crate::boards::Startup;
 use crate::ipc;
 use crate::{hist, rt};
+use afs_shared::insertion::rig::InsertionRig;
 use afs_shared::msg::{
     Board, Command, LoopFlags, LoopStats, PlantSample, ServoFlags, ServoSample, WorldSnapshot,
     WrenchFlags, WrenchSample,
@@ -20,6 +21,8 @@ use afs_shared::world::{World, WorldStateAny};
 use anyhow::{Context, Result, bail};
 use iceoryx2::port::update_connections::UpdateConnections;
 use std::sync::atomic::{AtomicBool, Ordering};
+
+mod peg;
 
 /// What a tick did.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -55,6 +58,8 @@ pub(super) struct ServoBoard {
     /// started when it was sent (it lapses once more have started).
     estimate_wanted: Option<u32>,
     last_tare: Wrench,
+    /// The insertion's rig (`insertion` scenario), which the tick runs instead of the arm.
+    peg: Option<InsertionRig>,
 }
 
 impl ServoBoard {
@@ -110,7 +115,11 @@ impl ServoBoard {
             gate: &mut gate,
             injected: &mut injected,
         };
-        let p0 = first_world_sample(&plant, snapshot.as_ref(), seq);
+        let peg = peg::rig(&scenario, snapshot.as_ref())?;
+        let p0 = match (&peg, &snapshot) {
+            (Some(rig), None) => peg::first_sample(rig, seq),
+            _ => first_world_sample(&plant, snapshot.as_ref(), seq),
+        };
         seq += 1;
         let Some(first) = input.wait(p0, args, period_ns, &mut startup, stop)? else {
             return Ok(None);
@@ -140,6 +149,7 @@ impl ServoBoard {
             safe_reason: 0,
             estimate_wanted: None,
             last_tare: first.tare(),
+            peg,
         };
         board.go_realtime(args);
         Ok(Some(board))
@@ -169,6 +179,9 @@ impl ServoBoard {
     pub(super) fn tick(&mut self, deadline: u64) -> Tick {
         let now = rt::monotonic_ns();
         let late = now.saturating_sub(deadline);
+        if self.peg.is_some() {
+            return self.tick_peg(now, late);
+        }
         self.take_force();
         let (input, used) = self.input(now);
         let t = self.plant.time();
@@ -297,6 +310,7 @@ impl ServoBoard {
             controller: self.servo.state(),
             gate: self.gate.counters(),
             injected: self.injected,
+            insertion: Default::default(),
             plant,
         }
     }

@@ -6,8 +6,9 @@ use super::link::Transport;
 use super::{EstimatorVia, ServoArgs};
 use crate::ipc::{self, Svc};
 use afs_shared::msg::{
-    LoopStats, PlantSample, ServoCommand, ServoSample, WorldSnapshot, WrenchSample,
+    LoopStats, PegSample, PlantSample, ServoCommand, ServoSample, WorldSnapshot, WrenchSample,
 };
+use afs_shared::scenario::ScenarioKind;
 use anyhow::{Context, Result};
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
@@ -27,6 +28,8 @@ pub(super) struct Ports {
     pub(super) wrench: Subscriber<Svc, WrenchSample, ()>,
     /// Commands (a tangent estimate asked for).
     pub(super) command: Subscriber<Svc, ServoCommand, ()>,
+    /// The insertion, every tick (`insertion` scenario only).
+    pub(super) peg: Option<Publisher<Svc, PegSample, ()>>,
     /// The supervisor's world blackboard (None when run on its own).
     pub(super) world: Option<WorldBoard>,
 }
@@ -96,6 +99,17 @@ impl Ports {
                 .buffer_size(16)
                 .create()
                 .context("command subscriber")?,
+            peg: if args.scenario == ScenarioKind::Insertion.name() {
+                Some(
+                    ipc::peg(node)?
+                        .publisher_builder()
+                        .backpressure_strategy(ipc::BACKPRESSURE)
+                        .create()
+                        .context("insertion publisher")?,
+                )
+            } else {
+                None
+            },
             world: open_world(node)?,
         };
         Ok((ports, open_estimator(node, args.estimator_via)?))

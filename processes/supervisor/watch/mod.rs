@@ -31,6 +31,16 @@ use std::time::{Duration, Instant};
 /// The first contact's transient is not a fault's: the normal force counts from here (s).
 const FAULT_SETTLE_S: f64 = 0.5;
 
+/// The force the safety figures are measured against (N): the preload while tracking, the
+/// insertion force in an insertion.
+pub(super) fn nominal_force_n(scenario: &Scenario) -> f64 {
+    scenario
+        .insertion
+        .map_or(scenario.cfg.servo.hybrid.preload_n, |o| {
+            o.controller_params().insertion_force_n
+        })
+}
+
 /// Why a run ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -133,7 +143,7 @@ impl Supervisor {
             injector: None,
             link_cut: None,
             monitor: scenario.monitor(),
-            faults: FaultMonitor::new(scenario.cfg.servo.hybrid.preload_n, FAULT_SETTLE_S),
+            faults: FaultMonitor::new(nominal_force_n(scenario), FAULT_SETTLE_S),
             steady: [None, None],
             joiner: Joiner::default(),
             stats: None,

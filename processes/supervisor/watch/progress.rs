@@ -58,14 +58,21 @@ impl Supervisor {
                 st.force_age.p99 as f64 / 1000.0,
             )
         });
+        let figures = match &r.insertion {
+            Some(i) => format!(
+                "depth {:5.2} mm  peak force {:5.2} N  jammed ticks {}",
+                i.depth_mm, i.peak_force_n, i.jammed_ticks
+            ),
+            None => format!(
+                "travelled {:5.1} mm  tangent err RMS {:4.2}°  estimates {}",
+                r.tracking.travelled_m * 1e3,
+                r.tracking.tangent_error_rms_deg,
+                r.tracking.estimations.estimates,
+            ),
+        };
         let line = format!(
-            "afs: {:6.1}/{:.0} s  travelled {:5.1} mm  tangent err RMS {:4.2}°  estimates {}  safe ticks {}  wake p99 {jit:5.1} µs  force age p99 {age:5.1} µs  restarts {restarts}",
-            self.last_time_s,
-            self.duration,
-            r.tracking.travelled_m * 1e3,
-            r.tracking.tangent_error_rms_deg,
-            r.tracking.estimations.estimates,
-            r.safe_ticks,
+            "afs: {:6.1}/{:.0} s  {figures}  safe ticks {}  wake p99 {jit:5.1} µs  force age p99 {age:5.1} µs  restarts {restarts}",
+            self.last_time_s, self.duration, r.safe_ticks,
         );
         if tty {
             eprint!("\r{line}\x1b[K");

@@ -10,8 +10,8 @@ use crate::observe::topics::{self, Rec};
 use crate::observe::view::LiveView;
 use crate::rt;
 use afs_shared::msg::{
-    Board, BoardStartup, FrictionReport, LoopStats, PlantSample, ProcessState, SensorStats,
-    ServoCommand, ServoSample, SupervisorStatus, WrenchFlags, WrenchSample,
+    Board, BoardStartup, FrictionReport, LoopStats, PegSample, PlantSample, ProcessState,
+    SensorStats, ServoCommand, ServoSample, SupervisorStatus, WrenchFlags, WrenchSample,
 };
 use afs_shared::servo::ServoMode;
 use anyhow::{Context, Result};
@@ -33,12 +33,26 @@ pub struct Ports {
     pub(super) startup: Subscriber<Svc, BoardStartup, ()>,
     pub(super) status: Publisher<Svc, SupervisorStatus, ()>,
     pub(super) command: Publisher<Svc, ServoCommand, ()>,
+    /// The insertion's samples (`insertion` scenario only).
+    pub(super) peg: Option<Subscriber<Svc, PegSample, ()>>,
 }
 
 impl Ports {
-    /// Opens them on the supervisor's node.
-    pub fn open(node: &Node<Svc>) -> Result<Self> {
+    /// Opens them on the supervisor's node (with the insertion's stream for an insertion).
+    pub fn open(node: &Node<Svc>, insertion: bool) -> Result<Self> {
+        let peg = if insertion {
+            Some(
+                ipc::peg(node)?
+                    .subscriber_builder()
+                    .buffer_size(ipc::TICK_BUFFER)
+                    .create()
+                    .context("creating the insertion subscriber")?,
+            )
+        } else {
+            None
+        };
         Ok(Self {
+            peg,
             plant: ipc::plant(node)?
                 .subscriber_builder()
                 .buffer_size(ipc::TICK_BUFFER)
@@ -132,6 +146,7 @@ impl Supervisor {
             self.joiner.push_servo(v);
         }
         self.pair();
+        self.take_peg();
         while let Ok(Some(s)) = self.ports.wrench.receive() {
             let w = *s.payload();
             self.wrench_received += 1;
@@ -206,6 +221,16 @@ impl Supervisor {
         }
     }
 
+    /// The insertion's samples, to its monitor (which skips a restarted servo's repeat).
+    fn take_peg(&mut self) {
+        let Some(sub) = &self.ports.peg else {
+            return;
+        };
+        while let Ok(Some(s)) = sub.receive() {
+            self.monitor.push_peg(s.payload());
+        }
+    }
+
     /// Feeds the ticks with both samples to the monitors.
     fn pair(&mut self) {
         let (monitor, faults, sinks) = (&mut self.monitor, &mut self.faults, &mut self.sinks);
@@ -235,6 +260,7 @@ impl Supervisor {
             self.joiner.push_servo(*s.payload());
         }
         self.pair();
+        self.take_peg();
         while let Ok(Some(s)) = self.ports.friction.receive() {
             self.friction = Some(*s.payload());
         }

@@ -6,7 +6,7 @@ use super::*;
 use crate::error::ConfigError;
 use crate::insertion::monitor::{InsertionMonitor, PegTick};
 use crate::insertion::whitney::Fit;
-use crate::sensor::{SensorModel, SensorParams, Wrench};
+use crate::sensor::{SensorModel, Wrench};
 use serde::Serialize;
 
 pub use crate::insertion::monitor::WHITNEY_LEAST_FZ_N;
@@ -63,7 +63,7 @@ pub fn insertion(opts: &Options) -> Result<Outcome<InsertionSummary>, Experiment
     check_world(opts)?;
     let fit = o.fit();
     let mut rig = InsertionRig::new(&o, opts.seed)?;
-    let sensor_params = insertion_sensor(&opts.base.sensor);
+    let sensor_params = opts.base.sensor;
     let mut sensor = SensorModel::new(sensor_params, opts.seed);
     let tare = crate::sim::tare(&mut sensor);
     let dt = 1e-4;
@@ -133,15 +133,6 @@ pub fn insertion(opts: &Options) -> Result<Outcome<InsertionSummary>, Experiment
         checks,
         figure,
     })
-}
-
-/// The wrist sensor of an insertion: the set-up's, with the force noise of a small
-/// force/torque sensor (0.02 N).
-pub fn insertion_sensor(base: &SensorParams) -> SensorParams {
-    SensorParams {
-        noise_force_n: 0.02,
-        ..*base
-    }
 }
 
 /// Insertion runs on the built-in plant only (the wrist is not in MuJoCo's model yet).

@@ -58,7 +58,7 @@ pub struct InsertionRun {
     pub jamming_diagram_samples: usize,
     /// The fraction of them inside Whitney's jamming parallelogram at the depth of the moment.
     pub inside_parallelogram: Option<f64>,
-    /// Ticks seen.
+    /// Ticks seen (with those of the hold at depth).
     pub ticks: u64,
 }
 
@@ -111,8 +111,14 @@ impl InsertionMonitor {
         }
     }
 
-    /// One tick.
+    /// One tick. Once the insertion is done, the ticks of the hold at depth (the `insertion`
+    /// scenario runs to its time limit) are counted and nothing else: the figures are the
+    /// insertion's.
     pub fn push(&mut self, k: &PegTick) {
+        self.ticks += 1;
+        if self.phase == Phase::Done {
+            return;
+        }
         let start = k.t - self.dt;
         let before = class(self.true_before);
         if self.states.last().is_none_or(|s| s.1 != before) {
@@ -161,7 +167,6 @@ impl InsertionMonitor {
                 tr.pose[2].to_degrees(),
             ]);
         }
-        self.ticks += 1;
     }
 
     /// Depth, forces and tilt every 5 ms: time, depth (mm), F_x, F_y (N), tilt (deg).

@@ -255,7 +255,12 @@ impl InsertionRig {
 
     /// At depth, or stopped by the force limit.
     pub fn finished(&self) -> bool {
-        self.phase() == Phase::Done || self.peak_force_n > self.limit_n
+        self.phase() == Phase::Done || self.failed()
+    }
+
+    /// Stopped by the force limit: a contact force above it has been seen.
+    pub fn failed(&self) -> bool {
+        self.peak_force_n > self.limit_n
     }
 
     /// The seed's initial lateral (m) and angle (rad) errors.

@@ -121,6 +121,8 @@ pub fn layouts() -> Vec<MessageLayout> {
         L::message::<PlantSample>(),
         L::message::<ServoSample>(),
         L::message::<ServoCommand>(),
+        L::message::<PegSample>(),
+        L::part::<PegTruthMsg>(),
         L::part::<Quantiles>(),
         L::part::<GateCounters>(),
         L::message::<LoopStats>(),
@@ -149,6 +151,7 @@ pub fn layouts() -> Vec<MessageLayout> {
         L::part::<TunerState>(),
         L::part::<SlidingSummary>(),
         L::part::<PeriodWindowState>(),
+        L::part::<InsertionState>(),
     ]
 }
 

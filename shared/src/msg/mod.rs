@@ -12,6 +12,7 @@
 //! [`ProbePlan`]) live here so that both ends of a service use the same code.
 
 mod estimation;
+mod insertion;
 mod layout;
 mod link;
 mod samples;
@@ -19,6 +20,7 @@ mod status;
 mod world;
 
 pub use estimation::*;
+pub use insertion::*;
 pub use layout::*;
 pub use link::*;
 pub use samples::*;
@@ -66,6 +68,8 @@ pub mod service {
     pub const ROTATION_REQUEST: &str = "afs/estimator/rotation/request";
     /// ... and [`RotationResponse`](super::RotationResponse).
     pub const ROTATION_RESPONSE: &str = "afs/estimator/rotation/response";
+    /// [`PegSample`](super::PegSample), every servo tick of the `insertion` scenario.
+    pub const PEG: &str = "afs/insertion/state";
     /// Blackboard of the world's state (key 0: [`WorldSnapshot`](super::WorldSnapshot)),
     /// owned by the supervisor, written by the servo.
     pub const WORLD: &str = "afs/plant/world";

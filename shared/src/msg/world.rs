@@ -1,5 +1,6 @@
 //! The world snapshot the servo keeps in the supervisor's blackboard, for a restarted servo.
 
+use super::insertion::InsertionState;
 use super::samples::PlantSample;
 use crate::plant::PlantState;
 use crate::scenario::DriverMemo;
@@ -143,12 +144,12 @@ impl From<&DriverMemoMsg> for DriverMemo {
 }
 
 wire_message! {
-    version = 4;
+    version = 5;
     /// The world's state the servo keeps in the supervisor's blackboard so that a restarted
     /// servo resumes the world, its controller and its counts where they were (one entry per
     /// servo incarnation of [`service::WORLD`](super::service::WORLD)).
     #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
-    #[type_name("afs::WorldSnapshot.v4")]
+    #[type_name("afs::WorldSnapshot.v5")]
     pub struct WorldSnapshot {
         /// The layout version, `Self::VERSION`; 0 means "no snapshot yet".
         pub version: u32,
@@ -167,6 +168,8 @@ wire_message! {
         pub gate: GateCounters,
         /// Of those, on the samples flagged as injected (`afs chaos`).
         pub injected: GateCounters,
+        /// The insertion (`insertion` scenario; `active` 0 otherwise).
+        pub insertion: InsertionState,
         /// The world sample of tick `seq`, exactly as published (written before it is sent): a
         /// restarted servo sends it again, so the tick reaches subscribers whether or not its
         /// predecessor died before sending it; a subscriber drops the identical repeat.

@@ -10,26 +10,30 @@
 //! [`ScenarioReport`], so the real-time stack and its lockstep reference are measured by one
 //! piece of code and [`Agreement`] can compare them.
 
+mod insertion;
 mod reference;
 mod report;
 
 pub use reference::*;
 pub use report::*;
 
-use crate::error::{ScenarioError, UnknownName};
+use crate::error::{ConfigError, ScenarioError, UnknownName};
+use crate::insertion::rig::InsertionOptions;
 use crate::servo::ServoCore;
 use crate::setups::on_corner_profile;
 use crate::sim::SimConfig;
 use crate::surface::{Shape, Surface, SurfaceFrame};
 use crate::tuner::{CostTunerParams, TunerConfig};
+use crate::world::WorldKind;
 use serde::Serialize;
 
 /// The scenarios `afs run --scenario` knows.
-pub const NAMES: [&str; 4] = [
+pub const NAMES: [&str; 5] = [
     "surface-tracking",
     "corner",
     "friction-suppression",
     "friction-id",
+    "insertion",
 ];
 
 /// Which scenario.
@@ -45,6 +49,9 @@ pub enum ScenarioKind {
     /// Constant-velocity strokes at several speeds without dither, for the estimator's on-line
     /// friction identification.
     FrictionId,
+    /// Force-guided insertion of a peg (docs/insertion.md) with the default fit, from the
+    /// seed's initial errors.
+    Insertion,
 }
 
 impl ScenarioKind {
@@ -55,6 +62,7 @@ impl ScenarioKind {
             "corner" => Self::Corner,
             "friction-suppression" => Self::FrictionSuppression,
             "friction-id" => Self::FrictionId,
+            "insertion" => Self::Insertion,
             other => {
                 return Err(UnknownName {
                     what: "scenario",
@@ -72,6 +80,7 @@ impl ScenarioKind {
             Self::Corner => "corner",
             Self::FrictionSuppression => "friction-suppression",
             Self::FrictionId => "friction-id",
+            Self::Insertion => "insertion",
         }
     }
 }
@@ -108,6 +117,8 @@ pub struct Scenario {
     pub end_u_m: Option<f64>,
     /// Its natural length (s): the time it needs in the lockstep, or an upper bound.
     pub natural_duration_s: f64,
+    /// The insertion's settings (`insertion` only).
+    pub insertion: Option<InsertionOptions>,
 }
 
 impl Scenario {
@@ -156,6 +167,18 @@ impl Scenario {
                     .sum();
                 (None, (ID_HOLD_S + t).ceil() + 1.0)
             }
+            ScenarioKind::Insertion => {
+                if cfg.world.kind != WorldKind::Builtin {
+                    return Err(ConfigError::rule(
+                        "world.kind",
+                        "is `mujoco`; the insertion scenario runs on the built-in plant only: \
+                         the wrist is not in MuJoCo's generated model yet (docs/insertion.md)",
+                    )
+                    .into());
+                }
+                cfg.servo.tuner = TunerConfig::Fixed;
+                (None, InsertionOptions::default().time_limit_s)
+            }
         };
         cfg.validate()?;
         Ok(Self {
@@ -163,6 +186,7 @@ impl Scenario {
             cfg,
             end_u_m,
             natural_duration_s: natural,
+            insertion: (kind == ScenarioKind::Insertion).then(InsertionOptions::default),
         })
     }
 
@@ -234,7 +258,7 @@ impl ScenarioDriver {
                     servo.hybrid_mut().set_velocity(SUPPRESSION_VELOCITY);
                     servo.set_a_omega(0.2 * SUPPRESSION_VELOCITY);
                 }
-                ScenarioKind::FrictionId => {
+                ScenarioKind::FrictionId | ScenarioKind::Insertion => {
                     servo.set_a_omega(0.0);
                 }
             }
@@ -242,6 +266,13 @@ impl ScenarioDriver {
         match self.kind {
             ScenarioKind::SurfaceTracking | ScenarioKind::Corner => {
                 if self.end_u_m.is_some_and(|end| u >= end) || t >= self.natural_duration_s {
+                    return DriverState::Done;
+                }
+            }
+            ScenarioKind::Insertion => {
+                // The insertion runs its own rig (`crate::insertion::rig`); the arm's servo
+                // idles.
+                if t >= self.natural_duration_s {
                     return DriverState::Done;
                 }
             }

@@ -3,8 +3,9 @@
 
 use super::{Replay, Scenario};
 use super::{ScenarioKind, TUNING_START_S};
+use crate::insertion::monitor::{InsertionMonitor, InsertionRun};
 use crate::monitor::{MonitorTick, TrackingMonitor, TrackingRun};
-use crate::msg::{PlantSample, ServoFlags, ServoSample};
+use crate::msg::{PegSample, PlantSample, ServoFlags, ServoSample};
 use crate::servo::EstimationCounters;
 use crate::ticks::{Tick, WindowSummary, sliding_periods, window};
 use serde::{Deserialize, Serialize};
@@ -47,6 +48,8 @@ pub struct ScenarioMonitor {
     invalid: Vec<TickRange>,
     requested: Vec<u64>,
     restarts: Vec<u64>,
+    /// The insertion's monitor (`insertion` only) and the last tick it saw.
+    insertion: Option<(InsertionMonitor, u64)>,
 }
 
 /// A run of consecutive servo ticks, by sequence number.
@@ -85,6 +88,23 @@ impl ScenarioMonitor {
             invalid: Vec::new(),
             requested: Vec::new(),
             restarts: Vec::new(),
+            insertion: scenario.insertion.map(|o| {
+                (
+                    InsertionMonitor::new(cfg.servo.dt(), o.fit(), o.force_limit_n()),
+                    0,
+                )
+            }),
+        }
+    }
+
+    /// One tick of the insertion (`insertion` only; a tick seen before, such as a restarted
+    /// servo's repeat of its predecessor's last, is skipped).
+    pub fn push_peg(&mut self, p: &PegSample) {
+        if let Some((m, last)) = &mut self.insertion
+            && p.seq > *last
+        {
+            *last = p.seq;
+            m.push(&p.tick());
         }
     }
 
@@ -130,7 +150,9 @@ impl ScenarioMonitor {
     /// One tick's samples.
     pub fn push(&mut self, p: &PlantSample, s: &ServoSample) {
         let m = MonitorTick::from_samples(p, s);
-        self.tracking.push(&m);
+        if self.kind != ScenarioKind::Insertion {
+            self.tracking.push(&m);
+        }
         if s.estimations_requested > self.counters.requested {
             self.requested.push(s.seq);
         }
@@ -212,6 +234,7 @@ impl ScenarioMonitor {
             duration_s: tracking.duration_s,
             tracking,
             friction,
+            insertion: self.insertion.as_ref().map(|(m, _)| m.report()),
         }
     }
 }
@@ -232,4 +255,7 @@ pub struct ScenarioReport {
     pub tracking: TrackingRun,
     /// Friction suppression (`friction-suppression` only).
     pub friction: Option<FrictionRun>,
+    /// The insertion (`insertion` only).
+    #[serde(default)]
+    pub insertion: Option<InsertionRun>,
 }
