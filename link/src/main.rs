@@ -241,9 +241,12 @@ fn run(cli: &Cli) -> Result<Summary> {
         sum.rounds += 1;
         ends.unpack(&mut sum);
     }
-    // Stopping: send what is packed and give the tunnel a moment to carry it.
+    // Stopping: take the servo's samples still waiting in the subscriber (the stack stops the
+    // link board right after the servo's last tick, possibly before a round has read it), send
+    // what is packed, and give the tunnel a moment to carry it.
+    ends.pack(&mut sum);
     if ends.flush(&mut sum) {
-        for _ in 0..50 {
+        for _ in 0..STOP_PROPAGATE_ROUNDS {
             let _ = link.propagate();
             std::thread::sleep(Duration::from_millis(2));
         }
@@ -256,6 +259,10 @@ fn run(cli: &Cli) -> Result<Summary> {
     sum.bridged = !link.bridges().empty();
     Ok(sum)
 }
+
+/// Rounds of the tunnel (2 ms apart) a stopping board runs to carry its last batch: 0.3 s,
+/// four times the worst batch latency seen on a loaded CI machine (76 ms).
+const STOP_PROPAGATE_ROUNDS: usize = 150;
 
 type Pub<T> = iceoryx2::port::publisher::Publisher<ipc::Svc, T, ()>;
 type Sub<T> = iceoryx2::port::subscriber::Subscriber<ipc::Svc, T, ()>;
