@@ -155,7 +155,7 @@ pub const STATUS_STREAM: StreamSettings = StreamSettings {
 /// packing link board and the far side's tunnel).
 pub const LINK_STREAM: StreamSettings = StreamSettings {
     history: 0,
-    buffer: 256,
+    buffer: 64,
     borrowed: None,
     subscribers: 4,
     publishers: 2,

@@ -307,7 +307,7 @@ mod tests {
             w.flat
         );
         let b = MessageLayout::message::<ServoBatch>();
-        assert!(b.flat.iter().any(|f| f.name == "samples[50].seq"));
+        assert!(b.flat.iter().any(|f| f.name == "samples[200].seq"));
         let r = MessageLayout::message::<RotationRequestHeader>();
         let c = r.fields.iter().find(|f| f.name == "centre_m").unwrap();
         assert_eq!((c.ty.as_str(), c.size), ("f64[6][2]", 96));

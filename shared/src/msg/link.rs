@@ -5,16 +5,17 @@ use super::ServoSample;
 use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 
-/// Servo samples per [`ServoBatch`]: 5 ms of ticks at 10 kHz.
-pub const SERVO_BATCH: usize = 50;
+/// Servo samples per [`ServoBatch`]: 20 ms of ticks at 10 kHz (50 batches a second: the
+/// zenoh carrier's inbox of 64 arrivals per service then holds 1.3 s, docs/link.md).
+pub const SERVO_BATCH: usize = 200;
 
 wire_message! {
-    version = 1;
+    version = 2;
     /// Consecutive [`ServoSample`]s of one servo, as the link board of the controller's host packs
     /// them (`afs/link/servo`); the link board of the remote host unpacks them onto its own
     /// `afs/servo/state`.
     #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-    #[type_name("afs::ServoBatch")]
+    #[type_name("afs::ServoBatch.v2")]
     pub struct ServoBatch {
         /// The layout version, `Self::VERSION` (docs/messages.md).
         pub version: u32,
