@@ -7,9 +7,13 @@
 //! adds the plant and the sensor; `lockstep_10s` simulates 10 s at 10 kHz (the real-time factor
 //! is 10 s divided by its time); `tuner_step/{cost,thesis}` is one tick of each dither tuner;
 //! `tangent_estimate` is the estimator's answer to a two-probe record (200 hold samples and
-//! two probes of 2 000 samples, the size the servo sends at 1 kHz).
+//! two probes of 2 000 samples, the size the servo sends at 1 kHz). `insertion_control_tick`
+//! is the insertion servo's tick (contact-state estimator and insertion controller) half-way
+//! into the hole; `insertion_rig_tick` adds the peg's plant (its contact sub-steps).
 
 use afs_shared::friction::FrictionLaw;
+use afs_shared::insertion::controller::Phase;
+use afs_shared::insertion::rig::{InsertionOptions, InsertionRig};
 use afs_shared::servo::ServoInput;
 use afs_shared::sim::{Lockstep, SimConfig};
 use afs_shared::tangent::{self, ProbeModel, TangentParams};
@@ -29,6 +33,16 @@ fn running_sim() -> Lockstep {
     sim.servo_mut().set_tuning(true);
     sim.run(5_000);
     sim
+}
+
+/// An insertion (default fit, seed 1) run on noiseless readings until the peg is 5 mm in.
+fn inserting_rig() -> InsertionRig {
+    let mut rig = InsertionRig::new(&InsertionOptions::default(), 1).expect("default insertion");
+    while !(rig.phase() == Phase::Insert && rig.truth().depth_m > 0.005) {
+        rig.step(Some(rig.sensor_wrench()), 1e-4);
+        assert!(rig.time_s() < 10.0, "the insertion never got 5 mm in");
+    }
+    rig
 }
 
 fn benches(c: &mut Criterion) {
@@ -105,6 +119,25 @@ fn benches(c: &mut Criterion) {
                 false,
             ))
         })
+    });
+
+    // Each iteration one tick from the same state half-way in (a rig left running would reach
+    // the depth and idle there).
+    let mid = inserting_rig();
+    let reading = Some(mid.sensor_wrench());
+    c.bench_function("insertion_control_tick", |b| {
+        b.iter_batched_ref(
+            || mid.clone(),
+            |r| black_box(r.control(black_box(reading), 1e-4)),
+            BatchSize::SmallInput,
+        )
+    });
+    c.bench_function("insertion_rig_tick", |b| {
+        b.iter_batched_ref(
+            || mid.clone(),
+            |r| r.step(black_box(reading), 1e-4),
+            BatchSize::SmallInput,
+        )
     });
 
     let law = FrictionLaw::THESIS;

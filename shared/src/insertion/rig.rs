@@ -198,10 +198,17 @@ impl InsertionRig {
     /// the controller's pose; without one (no valid force data: the servo's safe state) the
     /// controller stands still and the wrist holds its pose.
     pub fn step(&mut self, reading: Option<Wrench>, dt: f64) {
+        let (target, rate) = self.control(reading, dt);
+        self.advance(target, rate, dt);
+    }
+
+    /// The servo's part of a tick: the estimator and the controller on `reading`; the wrist's
+    /// commanded pose and rate.
+    pub fn control(&mut self, reading: Option<Wrench>, dt: f64) -> ([f64; 3], [f64; 3]) {
         let tip = self.plant.truth().pose;
         let speed = (tip[1] - self.prev_tip_y_m) / -dt;
         self.prev_tip_y_m = tip[1];
-        let (target, rate) = match reading {
+        match reading {
             Some(w) => {
                 let inp = Input {
                     force: [w.force.x, w.force.y],
@@ -212,7 +219,11 @@ impl InsertionRig {
                 self.ctl.step(&inp, dt)
             }
             None => (self.ctl.target(), [0.0; 3]),
-        };
+        }
+    }
+
+    /// The world's part of a tick: the peg under the wrist commanded to `target` at `rate`.
+    pub fn advance(&mut self, target: [f64; 3], rate: [f64; 3], dt: f64) {
         self.plant.step(target, rate, dt);
         self.time_s += dt;
         self.peak_force_n = self.peak_force_n.max(self.plant.truth().force.norm());
