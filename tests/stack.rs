@@ -79,9 +79,11 @@ fn surface_tracking_across_processes_agrees_with_the_lockstep() {
 fn the_insertion_across_processes_agrees_with_the_lockstep() {
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let p = prefix("ins");
+    let mcap = std::env::temp_dir().join(format!("afs-insertion-{p}.mcap"));
     let out = afs()
         .args(["run", "--scenario", "insertion", "--seed", "2"])
-        .args(["--json", "--quiet", "--prefix", &p])
+        .args(["--json", "--quiet", "--prefix", &p, "--record"])
+        .arg(&mcap)
         .output()
         .unwrap();
     let r = run_report(&out);
@@ -106,6 +108,11 @@ fn the_insertion_across_processes_agrees_with_the_lockstep() {
     assert_eq!((r.stack.ticks, stack.ticks), (100_000, 100_000));
     assert!(stack.phase_starts_s[3].is_some_and(|t| t < 10.0));
     assert_eq!((r.samples.plant_lost, r.samples.reordered), (0, 0));
+    // The recording has the insertion's display record of every tick (the Foxglove layout's
+    // insertion panels read it).
+    let rec = r.record.as_ref().expect("the recording's summary");
+    assert_eq!(rec.messages.get("/insertion"), Some(&100_000), "{rec:?}");
+    std::fs::remove_file(&mcap).unwrap();
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
 }
 

@@ -2,7 +2,7 @@
 //! topic list with each message's type name ([`TOPICS`]), and each topic's JSON schema from
 //! the message's byte layout. The recording, the live view and the follower share it.
 
-use afs_shared::live::LiveSample;
+use afs_shared::live::{InsertionLive, LiveSample};
 use afs_shared::msg::{
     self, FrictionReport, LoopStats, PlantSample, SensorStats, ServoSample, SupervisorStatus,
     WrenchSample,
@@ -28,10 +28,12 @@ pub enum Rec {
     SensorStats(SensorStats),
     /// `/live`: the tick's display record, from its world and controller samples.
     Live(LiveSample),
+    /// `/insertion`: an insertion tick's display record (`insertion` scenario).
+    Insertion(InsertionLive),
 }
 
 /// The topics, in channel order: (topic, message type name).
-pub const TOPICS: [(&str, &str); 8] = [
+pub const TOPICS: [(&str, &str); 9] = [
     ("/plant", "afs::PlantSample"),
     ("/servo", "afs::ServoSample.v2"),
     ("/wrench", "afs::WrenchSample"),
@@ -40,6 +42,7 @@ pub const TOPICS: [(&str, &str); 8] = [
     ("/supervisor", "afs::SupervisorStatus"),
     ("/sensor_stats", "afs::SensorStats"),
     ("/live", "afs::LiveSample"),
+    ("/insertion", "afs::InsertionLive"),
 ];
 
 impl Rec {
@@ -54,6 +57,7 @@ impl Rec {
             Rec::Status(_) => 5,
             Rec::SensorStats(_) => 6,
             Rec::Live(_) => 7,
+            Rec::Insertion(_) => 8,
         }
     }
 
@@ -68,6 +72,7 @@ impl Rec {
             Rec::Status(s) => s.publish_ns,
             Rec::SensorStats(s) => s.publish_ns,
             Rec::Live(s) => s.publish_ns,
+            Rec::Insertion(s) => s.publish_ns,
         }
     }
 
@@ -85,6 +90,7 @@ impl Rec {
             Rec::Status(s) => j(s),
             Rec::SensorStats(s) => j(s),
             Rec::Live(s) => j(s),
+            Rec::Insertion(s) => j(s),
         }
     }
 }
@@ -98,7 +104,10 @@ pub fn live(p: &PlantSample, s: &ServoSample) -> Option<Rec> {
 /// objects).
 pub fn json_schema(type_name: &str) -> String {
     if type_name == "afs::LiveSample" {
-        return live_schema().to_string();
+        return serde_schema(type_name, &LiveSample::default()).to_string();
+    }
+    if type_name == "afs::InsertionLive" {
+        return serde_schema(type_name, &InsertionLive::default()).to_string();
     }
     let layouts = msg::layouts();
     let Some(l) = layouts.iter().find(|l| l.type_name == type_name) else {
@@ -125,10 +134,10 @@ pub fn json_schema(type_name: &str) -> String {
     serde_json::json!({"type": "object", "title": type_name, "properties": props}).to_string()
 }
 
-/// The schema of [`LiveSample`] (not an iceoryx2 message, so without a byte layout): every
-/// field typed as it serialises.
-fn live_schema() -> serde_json::Value {
-    let value = serde_json::to_value(LiveSample::default()).unwrap_or_default();
+/// The schema of a display record (not an iceoryx2 message, so without a byte layout):
+/// every field typed as it serialises.
+fn serde_schema<T: Serialize>(title: &str, sample: &T) -> serde_json::Value {
+    let value = serde_json::to_value(sample).unwrap_or_default();
     let props: serde_json::Map<String, serde_json::Value> = value
         .as_object()
         .into_iter()
@@ -142,13 +151,13 @@ fn live_schema() -> serde_json::Value {
             (k.clone(), serde_json::json!({ "type": ty }))
         })
         .collect();
-    serde_json::json!({"type": "object", "title": "afs::LiveSample", "properties": props})
+    serde_json::json!({"type": "object", "title": title, "properties": props})
 }
 
 #[cfg(test)]
 mod schema_tests {
     use super::{TOPICS, json_schema};
-    use afs_shared::live::LiveSample;
+    use afs_shared::live::{InsertionLive, LiveSample};
     /// Every topic's schema lists exactly the fields its JSON carries, typed as they serialise.
     #[test]
     fn every_schema_types_the_fields_its_messages_carry() {
@@ -165,13 +174,24 @@ mod schema_tests {
         assert_eq!(props["seq"]["type"], "integer");
         assert_eq!(props["tangent_error_deg"]["type"], "number");
         assert_eq!(props["safe"]["type"], "boolean");
+        let insertion = serde_json::to_value(InsertionLive::default()).unwrap();
+        let schema: serde_json::Value =
+            serde_json::from_str(&json_schema("afs::InsertionLive")).unwrap();
+        let props = schema["properties"].as_object().unwrap();
+        assert_eq!(props.len(), insertion.as_object().unwrap().len());
+        assert_eq!(props["phase"]["type"], "integer");
+        assert_eq!(props["depth_mm"]["type"], "number");
+        assert_eq!(props["force_valid"]["type"], "boolean");
     }
 
     /// Each topic's type name is its message's iceoryx2 type name (with its version).
     #[test]
     fn topics_name_their_messages_as_iceoryx2_does() {
         let layouts = afs_shared::msg::layouts();
-        for (topic, ty) in TOPICS.iter().filter(|t| t.0 != "/live") {
+        for (topic, ty) in TOPICS
+            .iter()
+            .filter(|t| t.0 != "/live" && t.0 != "/insertion")
+        {
             assert!(
                 layouts
                     .iter()

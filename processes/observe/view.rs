@@ -145,6 +145,7 @@ impl Decimator {
             // The world sample of the tick came first and taught the stride.
             Rec::Servo(s) => self.stride.is_some_and(|k| s.seq.is_multiple_of(k)),
             Rec::Live(l) => self.stride.is_some_and(|k| l.seq.is_multiple_of(k)),
+            Rec::Insertion(l) => self.stride.is_some_and(|k| l.seq.is_multiple_of(k)),
             // The first sample of each period of the rate.
             Rec::Wrench(w) => {
                 let bucket = w.sample_ns / self.every_ns.max(1);
@@ -460,6 +461,25 @@ mod tests {
             "safe",
         ] {
             let path = format!("/live.{want}");
+            assert!(
+                cfg.values().any(|p| p["paths"]
+                    .as_array()
+                    .into_iter()
+                    .flatten()
+                    .any(|x| x["value"] == path.as_str())),
+                "no panel shows {path}"
+            );
+        }
+        // The insertion: depth and forces, Whitney's axes, phase and contact states.
+        for want in [
+            "depth_mm",
+            "force_y_n",
+            "whitney_m",
+            "phase",
+            "true_state",
+            "estimated_state",
+        ] {
+            let path = format!("/insertion.{want}");
             assert!(
                 cfg.values().any(|p| p["paths"]
                     .as_array()

@@ -119,3 +119,76 @@ mod tests {
         assert_eq!(LiveSample::of_tick(&q, &s), None);
     }
 }
+
+/// One insertion tick, for display (the `/insertion` topic of the `insertion` scenario): the
+/// depth, the contact force and moment, the tilt, the phase, the true and estimated contact
+/// states and the applied wrench on Whitney's axes. Units are in the field names.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct InsertionLive {
+    /// Servo tick index.
+    pub seq: u64,
+    /// Monotonic time the sample was published (ns).
+    pub publish_ns: u64,
+    /// Simulated time (s).
+    pub time_s: f64,
+    /// Depth of the peg's tip below the face (mm).
+    pub depth_mm: f64,
+    /// Contact force on the peg across the hole's axis (N).
+    pub force_x_n: f64,
+    /// Contact force on the peg along the hole's axis (N, out of the hole positive).
+    pub force_y_n: f64,
+    /// Its moment about the tip (N·m).
+    pub moment_nm: f64,
+    /// The peg's tilt from the hole's axis (deg).
+    pub tilt_deg: f64,
+    /// Commanded lateral position of the tip (mm).
+    pub target_x_mm: f64,
+    /// The applied wrench on Whitney's axes, F_x/F_z (0 while the wrist pushes less than
+    /// 0.25 N into the hole).
+    pub whitney_f: f64,
+    /// M/(r F_z), likewise.
+    pub whitney_m: f64,
+    /// Phase (0 approach, 1 find, 2 align, 3 insert, 4 done).
+    pub phase: u32,
+    /// True contact state (0 free, 1 face, 2 chamfer, 3 one-point, 4 two-point, 5 jammed,
+    /// 6 wedged, 7 bottom).
+    pub true_state: u32,
+    /// Estimated contact state (same codes).
+    pub estimated_state: u32,
+    /// The controller had force data this tick.
+    pub force_valid: bool,
+}
+
+impl InsertionLive {
+    /// The record of one insertion tick, for a peg of width `peg_width_m`.
+    pub fn of_sample(g: &crate::msg::PegSample, peg_width_m: f64) -> Self {
+        let t = &g.truth;
+        let fz = -t.applied_force_n[1];
+        let pushed = t.depth_m > 0.0 && fz > crate::insertion::monitor::WHITNEY_LEAST_FZ_N;
+        let (whitney_f, whitney_m) = if pushed {
+            (
+                t.applied_force_n[0] / fz,
+                t.applied_moment_nm / (0.5 * peg_width_m * fz),
+            )
+        } else {
+            (0.0, 0.0)
+        };
+        Self {
+            seq: g.seq,
+            publish_ns: g.publish_ns,
+            time_s: g.time_s,
+            depth_mm: t.depth_m * 1e3,
+            force_x_n: t.force_n[0],
+            force_y_n: t.force_n[1],
+            moment_nm: t.moment_nm,
+            tilt_deg: t.pose[2].to_degrees(),
+            target_x_mm: g.target[0] * 1e3,
+            whitney_f,
+            whitney_m,
+            phase: g.phase,
+            true_state: t.state,
+            estimated_state: g.estimated_state,
+            force_valid: g.flags.contains(crate::msg::PegFlags::FORCE_VALID),
+        }
+    }
+}

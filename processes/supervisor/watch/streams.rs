@@ -9,6 +9,8 @@ use crate::observe::record::Recorder;
 use crate::observe::topics::{self, Rec};
 use crate::observe::view::LiveView;
 use crate::rt;
+use afs_shared::insertion::geometry::PegHoleGeometry;
+use afs_shared::live::InsertionLive;
 use afs_shared::msg::{
     Board, BoardStartup, FrictionReport, LoopStats, PegSample, PlantSample, ProcessState,
     SensorStats, ServoCommand, ServoSample, SupervisorStatus, WrenchFlags, WrenchSample,
@@ -226,8 +228,15 @@ impl Supervisor {
         let Some(sub) = &self.ports.peg else {
             return;
         };
+        // The scenario's peg (its options set the fit, never the peg).
+        let width = PegHoleGeometry::default().peg_width_m;
         while let Ok(Some(s)) = sub.receive() {
-            self.monitor.push_peg(s.payload());
+            let g = s.payload();
+            self.monitor.push_peg(g);
+            if self.sinks.any() {
+                self.sinks
+                    .push(Rec::Insertion(InsertionLive::of_sample(g, width)));
+            }
         }
     }
 
