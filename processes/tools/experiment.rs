@@ -382,24 +382,24 @@ pub struct ExperimentArgs {
 /// `afs experiment insertion`'s options (docs/insertion.md).
 #[derive(Debug, Clone, clap::Args)]
 pub struct InsertionArgs {
-    /// insertion: clearance ratio c = (D − d)/D.
-    #[arg(long, default_value_t = 0.002)]
-    pub clearance: f64,
-    /// insertion: friction coefficient μ at every contact.
-    #[arg(long, default_value_t = 0.3)]
-    pub mu: f64,
-    /// insertion: chamfer leg (mm); 0 for a sharp edge.
-    #[arg(long, default_value_t = 0.5)]
-    pub chamfer_mm: f64,
+    /// insertion: clearance ratio c = (D − d)/D [default: the set-up's, 0.002].
+    #[arg(long)]
+    pub clearance: Option<f64>,
+    /// insertion: friction coefficient μ at every contact [default: the set-up's, 0.3].
+    #[arg(long)]
+    pub mu: Option<f64>,
+    /// insertion: chamfer leg (mm); 0 for a sharp edge [default: the set-up's, 0.5].
+    #[arg(long)]
+    pub chamfer_mm: Option<f64>,
     /// insertion: initial lateral error (mm); default uniform in ±2 mm per seed.
     #[arg(long, allow_hyphen_values = true)]
     pub lateral_mm: Option<f64>,
     /// insertion: initial angle error (deg); default uniform in ±2° per seed.
     #[arg(long, allow_hyphen_values = true)]
     pub angle_deg: Option<f64>,
-    /// insertion: the controller.
-    #[arg(long, default_value = "dither", value_parser = ["dither", "no-dither", "search"])]
-    pub method: String,
+    /// insertion: the controller [default: the set-up's, dither].
+    #[arg(long, value_parser = ["dither", "no-dither", "search"])]
+    pub method: Option<String>,
     /// insertion: every method at every point of the grid (c 0.01, 0.002, 0.0005 × μ 0.1,
     /// 0.3, 0.5 × chamfer 0.5 mm, none) over --seeds, instead of one fit and method; prints
     /// the table and plots success against clearance (insertion_grid.svg). Exits 1 where the
@@ -409,17 +409,21 @@ pub struct InsertionArgs {
 }
 
 impl InsertionArgs {
-    fn options(&self) -> experiments::InsertionOptions {
+    /// The set-up's `[insertion]` settings with the options given on the command line.
+    fn options(&self, base: &experiments::InsertionOptions) -> experiments::InsertionOptions {
         experiments::InsertionOptions {
-            clearance_ratio: self.clearance,
-            mu: self.mu,
-            chamfer_mm: self.chamfer_mm,
-            lateral_mm: self.lateral_mm,
-            angle_deg: self.angle_deg,
+            clearance_ratio: self.clearance.unwrap_or(base.clearance_ratio),
+            mu: self.mu.unwrap_or(base.mu),
+            chamfer_mm: self.chamfer_mm.unwrap_or(base.chamfer_mm),
+            lateral_mm: self.lateral_mm.or(base.lateral_mm),
+            angle_deg: self.angle_deg.or(base.angle_deg),
             // The parser allows only the three names.
-            method: afs_shared::insertion::controller::Method::parse(&self.method)
-                .unwrap_or_default(),
-            ..Default::default()
+            method: self
+                .method
+                .as_deref()
+                .and_then(afs_shared::insertion::controller::Method::parse)
+                .unwrap_or(base.method),
+            ..*base
         }
     }
 }
@@ -468,12 +472,13 @@ pub fn command(a: &ExperimentArgs, stop: &AtomicBool) -> Result<ExitCode> {
     if let Some(hz) = a.rate_hz {
         afs_shared::setups::set_rate(&mut base, hz)?;
     }
+    let insertion = a.insertion.options(&base.insertion);
     let opts = Options {
         seed: a.seed,
         thesis_table: a.thesis_table,
         base,
         rig,
-        insertion: a.insertion.options(),
+        insertion,
     };
     // The thesis's rig is defined for the friction experiments only.
     let names: Vec<&str> = match a.name.as_str() {

@@ -5,6 +5,7 @@
 
 use crate::arm::{Arm, Elbow};
 use crate::error::{ConfigError, SnapshotError};
+use crate::insertion::rig::InsertionOptions;
 use crate::math::Vec2;
 use crate::plant::{PlantParams, PlantTruth};
 use crate::sensor::{Reading, SensorModel, SensorParams, Wrench};
@@ -34,6 +35,9 @@ pub struct SimConfig {
     pub seed: u64,
     /// Which world the servo drives (builtin or MuJoCo).
     pub world: WorldConfig,
+    /// The insertion's fit, initial errors, method and limits (`insertion` scenario and
+    /// experiment; docs/insertion.md).
+    pub insertion: InsertionOptions,
 }
 
 impl Default for SimConfig {
@@ -55,6 +59,7 @@ impl Default for SimConfig {
             tangent_error_rad: 0.0,
             seed: 1,
             world: WorldConfig::default(),
+            insertion: InsertionOptions::default(),
         }
     }
 }
@@ -67,6 +72,7 @@ impl SimConfig {
         self.sensor.validate()?;
         self.servo.validate()?;
         self.world.validate()?;
+        self.insertion.validate()?;
         if !self.start_u_m.is_finite() || !self.tangent_error_rad.is_finite() {
             return Err(ConfigError::rule(
                 "start_u_m and tangent_error_rad",

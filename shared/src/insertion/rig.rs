@@ -13,10 +13,12 @@ use crate::sensor::Wrench;
 use rand_chacha::ChaCha8Rng;
 use rand_chacha::rand_core::SeedableRng;
 use rand_distr::{Distribution, Uniform};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
-/// The insertion's settings (`afs experiment insertion --clearance ...`).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+/// The insertion's settings: the `[insertion]` table of a set-up (`afs experiment --config`, a
+/// stack file's `[sim.insertion]`), which `afs experiment insertion --clearance ...` overrides.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct InsertionOptions {
     /// Clearance ratio c = (D − d)/D.
     pub clearance_ratio: f64,

@@ -99,6 +99,24 @@ mod tests {
         }
     }
 
+    /// The scenario takes the set-up's `[insertion]` settings (a stack file's
+    /// `[sim.insertion]`): its fit, method and time limit.
+    #[test]
+    fn the_scenario_runs_the_set_ups_insertion() {
+        let mut base = SimConfig::default();
+        base.insertion.method = crate::insertion::controller::Method::Search;
+        base.insertion.clearance_ratio = 0.01;
+        base.insertion.time_limit_s = 4.0;
+        let s = Scenario::new("insertion", &base).unwrap();
+        assert_eq!(s.insertion, Some(base.insertion));
+        assert_eq!(s.natural_duration_s, 4.0);
+        let r = run_lockstep(&s, 100.0).unwrap();
+        assert_eq!(r.ticks, 40_000);
+        base.insertion.mu = f64::NAN;
+        let e = Scenario::new("insertion", &base).unwrap_err();
+        assert!(e.to_string().contains("insertion.mu"), "{e}");
+    }
+
     /// The stack's force-invalid ticks are replayed: the wrist holds for exactly those ticks
     /// (the safe state), and the insertion goes on after them.
     #[test]

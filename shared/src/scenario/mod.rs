@@ -49,7 +49,8 @@ pub enum ScenarioKind {
     /// Constant-velocity strokes at several speeds without dither, for the estimator's on-line
     /// friction identification.
     FrictionId,
-    /// Force-guided insertion of a peg (docs/insertion.md) with the default fit, from the
+    /// Force-guided insertion of a peg (docs/insertion.md) with the set-up's `[insertion]`
+    /// settings (default: c = 0.002, μ = 0.3, 0.5-mm chamfer, the dither method), from the
     /// seed's initial errors.
     Insertion,
 }
@@ -177,16 +178,17 @@ impl Scenario {
                     .into());
                 }
                 cfg.servo.tuner = TunerConfig::Fixed;
-                (None, InsertionOptions::default().time_limit_s)
+                (None, cfg.insertion.time_limit_s)
             }
         };
         cfg.validate()?;
+        let insertion = (kind == ScenarioKind::Insertion).then_some(cfg.insertion);
         Ok(Self {
             kind,
             cfg,
             end_u_m,
             natural_duration_s: natural,
-            insertion: (kind == ScenarioKind::Insertion).then(InsertionOptions::default),
+            insertion,
         })
     }
 
