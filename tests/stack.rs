@@ -116,6 +116,35 @@ fn the_insertion_across_processes_agrees_with_the_lockstep() {
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
 }
 
+/// `afs record` attached to a running insertion from outside records the insertion's display
+/// record (`/insertion`) beside the other topics, from the first supervisor status on.
+#[test]
+fn afs_record_attached_to_an_insertion_records_it() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let p = prefix("inr");
+    let run = start_run(&p, &["--scenario", "insertion", "--duration", "4"]);
+    wait_running(&p, Duration::from_secs(60));
+    let mcap = std::env::temp_dir().join(format!("afs-insertion-attached-{p}.mcap"));
+    let out = afs()
+        .args(["record", "--json", "--prefix", &p, "--out"])
+        .arg(&mcap)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rec: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let messages = &rec["recording"]["messages"];
+    let n = messages["/insertion"].as_u64().unwrap_or(0);
+    assert!(n > 1000, "{rec:#}");
+    assert!(n <= messages["/plant"].as_u64().unwrap(), "{rec:#}");
+    finish_passed(run.take(), "afs run");
+    std::fs::remove_file(&mcap).unwrap();
+    assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
+}
+
 /// While a stack runs: the Python client decodes wrench samples with the documented layout;
 /// `afs status` lists the boards; a second stack on the same prefix is refused with a clear
 /// message while one on another prefix runs beside it. Its recording plots and exports.

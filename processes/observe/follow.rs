@@ -5,11 +5,14 @@
 
 use super::topics::{Rec, live};
 use crate::ipc::{self, Svc};
+use afs_shared::insertion::geometry::PegHoleGeometry;
 use afs_shared::join::Joiner;
+use afs_shared::live::InsertionLive;
 use afs_shared::msg::{
-    FrictionReport, LoopStats, PlantSample, SensorStats, ServoSample, SupervisorPhase,
-    SupervisorStatus, WrenchSample,
+    self, FrictionReport, LoopStats, PegSample, PlantSample, SensorStats, ServoSample,
+    SupervisorPhase, SupervisorStatus, WrenchSample,
 };
+use afs_shared::scenario::ScenarioKind;
 use anyhow::{Context, Result, bail};
 use iceoryx2::node::Node;
 use iceoryx2::port::subscriber::Subscriber;
@@ -38,6 +41,9 @@ pub struct Follower {
     sensor_stats: Subscriber<Svc, SensorStats, ()>,
     friction: Subscriber<Svc, FrictionReport, ()>,
     status: Subscriber<Svc, SupervisorStatus, ()>,
+    /// The insertion's stream, opened once the supervisor's status names the `insertion`
+    /// scenario (a stack of another scenario does not have it).
+    peg: Option<Subscriber<Svc, PegSample, ()>>,
     /// Holds the ports' node (dropped after them).
     _node: Node<Svc>,
     joiner: Joiner,
@@ -84,6 +90,7 @@ impl Follower {
                 .subscriber_builder()
                 .create()
                 .with_context(|| sub("status"))?,
+            peg: None,
             _node: node,
             joiner: Joiner::default(),
             heard: Instant::now(),
@@ -128,11 +135,28 @@ impl Follower {
             sink(Rec::Friction(*s.payload()));
         }
         let mut stopping = false;
+        let mut insertion = false;
         while let Ok(Some(s)) = self.status.receive() {
             any = true;
             let st = *s.payload();
             sink(Rec::Status(st));
             stopping |= SupervisorPhase::try_from(st.phase) == Ok(SupervisorPhase::Stopping);
+            insertion |= msg::str_of(&st.scenario) == ScenarioKind::Insertion.name();
+        }
+        if insertion && self.peg.is_none() {
+            self.peg = Some(
+                ipc::peg(&self._node)?
+                    .subscriber_builder()
+                    .create()
+                    .with_context(|| format!("creating the {} insertion subscriber", self.name))?,
+            );
+        }
+        if let Some(peg) = &self.peg {
+            // The scenario's peg (its settings set the fit, never the peg).
+            let width = PegHoleGeometry::default().peg_width_m;
+            while let Ok(Some(s)) = peg.receive() {
+                sink(Rec::Insertion(InsertionLive::of_sample(s.payload(), width)));
+            }
         }
         if stopping {
             return Ok(Some(Ended::Stopping));
