@@ -66,7 +66,8 @@ pub fn insertion(opts: &Options) -> Result<Outcome<InsertionSummary>, Experiment
     let sensor_params = opts.base.sensor;
     let mut sensor = SensorModel::new(sensor_params, opts.seed);
     let tare = crate::sim::tare(&mut sensor);
-    let dt = 1e-4;
+    // The servo's period (10 kHz; `--rate-hz` sets a real robot's 1 kHz or 500 Hz).
+    let dt = opts.base.servo.dt();
     let mut monitor = InsertionMonitor::new(dt, fit, o.force_limit_n());
     let (mut reading, mut next_sample, period) =
         (Wrench::default(), 0.0, 1.0 / sensor_params.rate_hz);
