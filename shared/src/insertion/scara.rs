@@ -265,4 +265,35 @@ mod tests {
         let direct = light.kinetic_energy(q0, qd0) + wrist;
         assert!((s.kinetic_energy(q0, qd0) - direct).abs() < 1e-12);
     }
+
+    /// The tool point's operational-space inertia Λ = (J M⁻¹ Jᵀ)⁻¹ with the peg pointing
+    /// down the hole, at three poses on both elbows (docs/insertion.md, *Not yet*): 4.25 kg
+    /// and 13–14 kg in x–y, 4–9·10⁻³ kg·m² in θ, at least 20 times the peg's 0.2 kg under the
+    /// compliant wrist. `-- --nocapture` prints them.
+    #[test]
+    fn the_tool_point_carries_the_arms_inertia() {
+        let s = scara();
+        for (x, y) in [(0.55, 0.0), (0.45, 0.2), (0.6, -0.2)] {
+            for elbow in [Elbow::Negative, Elbow::Positive] {
+                let pose = Vector3::new(x, y, -std::f64::consts::FRAC_PI_2);
+                let q = s.inverse(pose, elbow).unwrap();
+                let j = s.jacobian(q);
+                let m_inv = s.mass_matrix(q).try_inverse().unwrap();
+                let lambda = (j * m_inv * j.transpose()).try_inverse().unwrap();
+                let xy = lambda.fixed_view::<2, 2>(0, 0).into_owned();
+                let ev = xy.symmetric_eigenvalues();
+                let (lo, hi) = (ev.min(), ev.max());
+                eprintln!(
+                    "({x}, {y}) {elbow:?}: x-y {lo:.3} kg, {hi:.3} kg; theta {:.2e} kg m^2",
+                    lambda[(2, 2)]
+                );
+                assert!(
+                    (4.2..4.3).contains(&lo) && (13.0..14.5).contains(&hi),
+                    "{ev:?}"
+                );
+                assert!((3e-3..1e-2).contains(&lambda[(2, 2)]), "{lambda}");
+                assert!(lo >= 20.0 * 0.2);
+            }
+        }
+    }
 }
