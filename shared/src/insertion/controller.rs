@@ -114,8 +114,14 @@ pub struct ControllerParams {
     pub mu: f64,
     /// Lateral walk speed towards the unsupported side at full offset (m/s).
     pub walk_m_per_s: f64,
-    /// Depth past which the peg is in the hole (m below the face; the chamfer's depth is added).
+    /// Depth past which the peg is in the hole, for the search: its tip's centre this far below
+    /// the chamfer (m).
     pub in_hole_m: f64,
+    /// Depth past which the peg is in the bore, for the dither and no-dither methods: the tip
+    /// face's higher corner (the peg tilted as measured) this far below the chamfer (m). The
+    /// alignment must start before the two-point contact forms, l₂ = (D − d cos θ)/sin θ into
+    /// the bore: 0.14 mm at c = 0.0005 and 2° (docs/insertion.md).
+    pub in_bore_m: f64,
     /// Depth at which the insertion is done (m).
     pub target_depth_m: f64,
     /// Dither amplitude along the axis (m) and frequency (Hz).
@@ -156,6 +162,7 @@ impl Default for ControllerParams {
             mu: 0.3,
             walk_m_per_s: 0.002,
             in_hole_m: 0.5e-3,
+            in_bore_m: 0.05e-3,
             target_depth_m: 0.015,
             dither_m: 0.1e-3,
             dither_hz: 20.0,
@@ -234,7 +241,12 @@ impl Controller {
             method,
             wrist,
             face_y: 0.0,
-            in_hole_depth_m: params.in_hole_m + chamfer_depth_m,
+            in_hole_depth_m: chamfer_depth_m
+                + if method == Method::Search {
+                    params.in_hole_m
+                } else {
+                    params.in_bore_m
+                },
             phase: Phase::Approach,
             target: start,
             start_x: start[0],
@@ -343,7 +355,11 @@ impl Controller {
                     }
                 }
                 let depth = self.depth_m(inp.tip[1]);
-                if find && depth > self.in_hole_depth_m {
+                // The search goes by its tip's centre; the others by the tip face's higher
+                // corner (the peg tilted by θ), in the bore once it is.
+                let tilt = if search { 0.0 } else { inp.tip[2].sin().abs() };
+                let upper = depth - 0.5 * p.peg_width_m * tilt;
+                if find && upper > self.in_hole_depth_m {
                     self.next(if search { Phase::Insert } else { Phase::Align });
                 }
                 if self.phase == Phase::Align && self.aligned(inp, dt) {

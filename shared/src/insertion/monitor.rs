@@ -60,6 +60,9 @@ pub struct InsertionRun {
     pub inside_parallelogram: Option<f64>,
     /// Ticks seen (with those of the hold at depth).
     pub ticks: u64,
+    /// The force limit the insertion was held to (N).
+    #[serde(default)]
+    pub force_limit_n: f64,
 }
 
 /// Turns an insertion's ticks into an [`InsertionRun`].
@@ -201,6 +204,7 @@ impl InsertionMonitor {
             inside_parallelogram: (!self.whitney.is_empty())
                 .then(|| self.inside as f64 / self.whitney.len() as f64),
             ticks: self.ticks,
+            force_limit_n: self.limit_n,
         }
     }
 }

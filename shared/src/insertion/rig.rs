@@ -358,4 +358,31 @@ mod tests {
         let tip = r.truth().pose;
         assert!((tip[1] - before[1]).abs() < 1e-6, "{tip:?} vs {before:?}");
     }
+
+    /// At the tightest fit (c = 0.0005, wedging angle 0.1°) a peg tilted 1.4° goes in: the
+    /// alignment starts as the tip face's higher corner enters the bore, before the two-point
+    /// contact can form (0.2 mm in at that tilt). By the tip's centre 0.5 mm below the chamfer
+    /// it wedged there, as seeds 6, 7 and 8 of the sweep did.
+    #[test]
+    fn a_tilted_peg_is_aligned_before_it_can_wedge_in_a_tight_fit() {
+        let o = InsertionOptions {
+            clearance_ratio: 0.0005,
+            lateral_mm: Some(0.8),
+            angle_deg: Some(1.4),
+            ..InsertionOptions::default()
+        };
+        let mut rig = InsertionRig::new(&o, 1).unwrap();
+        let mut wedged = 0;
+        while !rig.finished() && rig.time_s() < o.time_limit_s {
+            rig.step(Some(rig.sensor_wrench()), 1e-4);
+            wedged += u32::from(rig.truth().state == ContactState::Wedged);
+        }
+        assert_eq!(
+            rig.phase(),
+            Phase::Done,
+            "{:?}, {wedged} ticks wedged",
+            rig.truth()
+        );
+        assert!(!rig.failed());
+    }
 }
