@@ -318,7 +318,7 @@ fn the_dither_method_inserts_where_its_baseline_does_not() {
     for c in ok.checks.iter().filter(|c| !c.is_target()) {
         assert!(c.pass, "{}", c.line());
     }
-    assert!(ok.summary.inserted && ok.summary.depth_mm >= 15.0);
+    assert!(ok.summary.run.inserted && ok.summary.run.depth_mm >= 15.0);
     let baseline = run(Method::NoDither);
     let inserted = afs_shared::check::find(&baseline.checks, "inserted").unwrap();
     assert!(!inserted.pass, "{}", inserted.line());
@@ -326,10 +326,10 @@ fn the_dither_method_inserts_where_its_baseline_does_not() {
     // parallelogram far more often than the search's, which jams (seed 1: 0.82 and 0.37).
     let search = run(Method::Search);
     let inside = |o: &experiments::Outcome<experiments::InsertionSummary>| {
-        assert!(o.summary.jamming_diagram_samples > 50);
-        o.summary.inside_parallelogram.unwrap()
+        assert!(o.summary.run.jamming_diagram_samples > 50);
+        o.summary.run.inside_parallelogram.unwrap()
     };
-    assert!(search.summary.jammed_ticks > 1000);
+    assert!(search.summary.run.jammed_ticks > 1000);
     assert!(inside(&ok) > 0.7 && inside(&search) < 0.5);
 }
 
@@ -454,7 +454,7 @@ fn the_insertion_grid_runs_every_method_at_every_fit() {
                     ..opts.clone()
                 })
                 .unwrap();
-                o.summary.inserted
+                o.summary.run.inserted
             })
             .count();
         assert_eq!(p["runs"], 2);

@@ -451,41 +451,28 @@ mod tests {
                 checked += 1;
             }
         }
-        // Normal and tangential force, Aω, tangent error, force age, the safe-state flags.
-        for want in [
-            "normal_force_n",
-            "tangential_force_n",
-            "a_omega_m_per_s",
-            "tangent_error_deg",
-            "force_age_us",
-            "safe",
+        // Normal and tangential force, Aω, tangent error, force age, the safe-state flags; the
+        // insertion's depth and forces, Whitney's axes, phase and contact states.
+        for path in [
+            "/live.normal_force_n",
+            "/live.tangential_force_n",
+            "/live.a_omega_m_per_s",
+            "/live.tangent_error_deg",
+            "/live.force_age_us",
+            "/live.safe",
+            "/insertion.depth_mm",
+            "/insertion.force_y_n",
+            "/insertion.whitney_m",
+            "/insertion.phase",
+            "/insertion.true_state",
+            "/insertion.estimated_state",
         ] {
-            let path = format!("/live.{want}");
             assert!(
                 cfg.values().any(|p| p["paths"]
                     .as_array()
                     .into_iter()
                     .flatten()
-                    .any(|x| x["value"] == path.as_str())),
-                "no panel shows {path}"
-            );
-        }
-        // The insertion: depth and forces, Whitney's axes, phase and contact states.
-        for want in [
-            "depth_mm",
-            "force_y_n",
-            "whitney_m",
-            "phase",
-            "true_state",
-            "estimated_state",
-        ] {
-            let path = format!("/insertion.{want}");
-            assert!(
-                cfg.values().any(|p| p["paths"]
-                    .as_array()
-                    .into_iter()
-                    .flatten()
-                    .any(|x| x["value"] == path.as_str())),
+                    .any(|x| x["value"] == path)),
                 "no panel shows {path}"
             );
         }

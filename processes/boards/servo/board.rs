@@ -10,8 +10,8 @@ use crate::ipc;
 use crate::{hist, rt};
 use afs_shared::insertion::rig::InsertionRig;
 use afs_shared::msg::{
-    Board, Command, LoopFlags, LoopStats, PlantSample, ServoFlags, ServoSample, WorldSnapshot,
-    WrenchFlags, WrenchSample,
+    Board, Command, InsertionState, LoopFlags, LoopStats, PlantSample, ServoFlags, ServoSample,
+    WorldSnapshot, WrenchFlags, WrenchSample,
 };
 use afs_shared::scenario::{DriverState, Scenario, ScenarioDriver};
 use afs_shared::sensor::Wrench;
@@ -277,8 +277,20 @@ impl ServoBoard {
     /// between the two leaves a tick its successor sends again, never one that is sent twice
     /// with different contents.
     fn publish(&mut self, now: u64, used: Option<(WrenchSample, u64)>) {
-        let mut p = PlantSample::of_tick(self.plant.truth(), self.seq, now);
-        let mut s = ServoSample::of_tick(&self.servo, self.seq, now, self.plant.time());
+        let p = PlantSample::of_tick(self.plant.truth(), self.seq, now);
+        let s = ServoSample::of_tick(&self.servo, self.seq, now, self.plant.time());
+        self.send(p, s, used, InsertionState::default());
+    }
+
+    /// Sends a tick's world and controller samples (`used`: the force sample the controller
+    /// used, with its age), the world snapshot with `insertion` written first.
+    fn send(
+        &mut self,
+        mut p: PlantSample,
+        mut s: ServoSample,
+        used: Option<(WrenchSample, u64)>,
+        insertion: InsertionState,
+    ) {
         s.safe_reason = self.safe_reason;
         if let Some((w, age)) = used {
             s.flags |= ServoFlags::FORCE_VALID;
@@ -288,7 +300,9 @@ impl ServoBoard {
         }
         p.publish_ns = rt::monotonic_ns();
         if let Some(world) = &self.ports.world {
-            world.write(self.snapshot(p));
+            let mut snapshot = self.snapshot(p);
+            snapshot.insertion = insertion;
+            world.write(snapshot);
         }
         if self.ports.plant.send_copy(p).is_err() {
             self.stats.publish_failures += 1;

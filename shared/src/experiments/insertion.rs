@@ -4,7 +4,7 @@
 
 use super::*;
 use crate::error::ConfigError;
-use crate::insertion::monitor::{InsertionMonitor, PegTick};
+use crate::insertion::monitor::{InsertionMonitor, InsertionRun, PegTick};
 use crate::insertion::whitney::Fit;
 use crate::sensor::{SensorModel, Wrench};
 use serde::Serialize;
@@ -29,31 +29,10 @@ pub struct InsertionSummary {
     pub angle_error_deg: f64,
     /// Whitney's wedging angle for the fit (deg).
     pub wedging_angle_deg: f64,
-    /// Depth reached within the time limit without exceeding the force limit.
-    pub inserted: bool,
-    /// Time from the first contact to the depth (s), if reached.
-    pub insertion_time_s: Option<f64>,
-    /// Largest contact force (N).
-    pub peak_force_n: f64,
-    /// Largest depth (mm).
-    pub depth_mm: f64,
-    /// Ticks spent jammed and wedged (true state).
-    pub jammed_ticks: u64,
-    /// Ticks spent wedged.
-    pub wedged_ticks: u64,
-    /// Ticks whose estimated contact state was the true one, over those counted (outside
-    /// 10 ms of a change of the true state; two-point, jammed and wedged are one class).
-    pub state_classification_accuracy: f64,
-    /// Ticks counted.
-    pub classified_ticks: usize,
-    /// Time each phase began (s): find, align, insert, done.
-    pub phase_starts_s: [Option<f64>; 4],
-    /// Samples (every 5 ms) of the applied wrench while the wrist pressed the peg in the hole
-    /// with at least [`WHITNEY_LEAST_FZ_N`].
-    pub jamming_diagram_samples: usize,
-    /// The fraction of them inside Whitney's jamming parallelogram at the depth of the moment
-    /// (None without samples).
-    pub inside_parallelogram: Option<f64>,
+    /// The insertion's figures (`InsertionRun`: inserted, time, peak force, depth, jams and
+    /// wedges, classification, phase starts, the jamming diagram's samples).
+    #[serde(flatten)]
+    pub run: InsertionRun,
 }
 
 /// One insertion on the built-in plant (docs/insertion.md): the peg starts 1 mm above the
@@ -119,17 +98,7 @@ pub fn insertion(opts: &Options) -> Result<Outcome<InsertionSummary>, Experiment
             lateral_error_mm: lateral * 1e3,
             angle_error_deg: angle.to_degrees(),
             wedging_angle_deg: fit.wedging_angle_rad().to_degrees(),
-            inserted: run.inserted,
-            insertion_time_s: run.insertion_time_s,
-            peak_force_n: run.peak_force_n,
-            depth_mm: run.depth_mm,
-            jammed_ticks: run.jammed_ticks,
-            wedged_ticks: run.wedged_ticks,
-            phase_starts_s: run.phase_starts_s,
-            state_classification_accuracy: run.state_classification_accuracy,
-            classified_ticks: run.classified_ticks,
-            jamming_diagram_samples: run.jamming_diagram_samples,
-            inside_parallelogram: run.inside_parallelogram,
+            run,
         },
         checks,
         figure,

@@ -63,6 +63,9 @@ pub struct InsertionRun {
     /// The force limit the insertion was held to (N).
     #[serde(default)]
     pub force_limit_n: f64,
+    /// Time of the last tick seen (s): where a run shorter than the time limit was cut.
+    #[serde(default)]
+    pub duration_s: f64,
 }
 
 /// Turns an insertion's ticks into an [`InsertionRun`].
@@ -88,6 +91,7 @@ pub struct InsertionMonitor {
     whitney: Vec<[f64; 2]>,
     inside: usize,
     ticks: u64,
+    last_t: f64,
 }
 
 impl InsertionMonitor {
@@ -111,6 +115,7 @@ impl InsertionMonitor {
             whitney: Vec::new(),
             inside: 0,
             ticks: 0,
+            last_t: 0.0,
         }
     }
 
@@ -119,6 +124,7 @@ impl InsertionMonitor {
     /// insertion's.
     pub fn push(&mut self, k: &PegTick) {
         self.ticks += 1;
+        self.last_t = k.t;
         if self.phase == Phase::Done {
             return;
         }
@@ -205,6 +211,7 @@ impl InsertionMonitor {
                 .then(|| self.inside as f64 / self.whitney.len() as f64),
             ticks: self.ticks,
             force_limit_n: self.limit_n,
+            duration_s: self.last_t,
         }
     }
 }

@@ -87,11 +87,11 @@ mod tests {
             .unwrap()
             .summary;
             assert!(run.inserted, "seed {seed}: {run:?}");
-            assert_eq!(run.insertion_time_s, e.insertion_time_s);
-            assert_eq!(run.peak_force_n, e.peak_force_n);
+            assert_eq!(run.insertion_time_s, e.run.insertion_time_s);
+            assert_eq!(run.peak_force_n, e.run.peak_force_n);
             assert_eq!(
                 run.state_classification_accuracy,
-                e.state_classification_accuracy
+                e.run.state_classification_accuracy
             );
             // It runs to the time limit, holding at depth once in.
             assert_eq!(r.ticks, 100_000);

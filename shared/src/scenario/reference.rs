@@ -179,7 +179,8 @@ pub fn compare(stack: &ScenarioReport, reference: &ScenarioReport) -> Agreement 
 }
 
 /// The insertion's figures (tolerances justified in docs/insertion.md, *On the stack*): the
-/// outcome and whether the force stayed in its limit `limit_n` must be the same; time and
+/// outcome (unless a run cut short ended before the other's was done) and whether the force
+/// stayed in its limit `limit_n` must be the same; time and
 /// classification may move by what the sensor's noise meeting the plant at other instants
 /// moves them. The peak force itself is a transient's and is reported, not compared: noise
 /// alone spreads it over 1.1–9.4 N at one start.
@@ -189,18 +190,27 @@ fn compare_insertion(
     limit_n: f64,
     add: &mut impl FnMut(&'static str, f64, f64, f64),
 ) {
+    // A run cut short (a --duration below the time limit) that ended before the other's
+    // insertion was done, give or take the time tolerance, has not decided its outcome yet.
+    let cut = |a: &InsertionRun, b: &InsertionRun| {
+        !a.inserted
+            && b.phase_starts_s[3].is_some_and(|t| a.duration_s < t + INSERTION_TIME_TOLERANCE_S)
+    };
+    let undecided = cut(s, r) || cut(r, s);
     add(
         "inserted (1 = yes)",
         f64::from(u8::from(s.inserted)),
         f64::from(u8::from(r.inserted)),
-        0.0,
+        if undecided { 1.0 } else { 0.0 },
     );
-    add(
-        "insertion time (s)",
-        s.insertion_time_s.unwrap_or(f64::NAN),
-        r.insertion_time_s.unwrap_or(f64::NAN),
-        INSERTION_TIME_TOLERANCE_S,
-    );
+    if !undecided {
+        add(
+            "insertion time (s)",
+            s.insertion_time_s.unwrap_or(f64::NAN),
+            r.insertion_time_s.unwrap_or(f64::NAN),
+            INSERTION_TIME_TOLERANCE_S,
+        );
+    }
     add(
         "peak contact force within the force limit (1 = yes)",
         f64::from(u8::from(s.peak_force_n <= limit_n)),
@@ -276,5 +286,53 @@ mod tests {
             }
         }
         assert_eq!(m.force_invalid(), gaps);
+    }
+
+    /// A run cut short just before its insertion was done is not a disagreement with one that
+    /// finished just before the cut; one that ran on without inserting is.
+    #[test]
+    fn an_insertion_cut_short_is_undecided_not_failed() {
+        let done = InsertionRun {
+            inserted: true,
+            insertion_time_s: Some(3.5),
+            peak_force_n: 8.0,
+            depth_mm: 15.0,
+            jammed_ticks: 0,
+            wedged_ticks: 0,
+            state_classification_accuracy: 0.98,
+            classified_ticks: 30_000,
+            phase_starts_s: [Some(0.48), Some(1.2), Some(2.7), Some(3.98)],
+            jamming_diagram_samples: 150,
+            inside_parallelogram: Some(0.8),
+            ticks: 40_000,
+            force_limit_n: 15.0,
+            duration_s: 4.0,
+        };
+        let cut = InsertionRun {
+            inserted: false,
+            insertion_time_s: None,
+            phase_starts_s: [Some(0.48), Some(1.2), Some(2.7), None],
+            depth_mm: 14.9,
+            ..done.clone()
+        };
+        let report = |run: &InsertionRun| ScenarioReport {
+            scenario: "insertion".into(),
+            ticks: run.ticks,
+            safe_ticks: 0,
+            duration_s: run.duration_s,
+            tracking: crate::monitor::TrackingMonitor::new(2.5, 200)
+                .finish(crate::servo::EstimationCounters::default()),
+            friction: None,
+            insertion: Some(run.clone()),
+        };
+        assert!(compare(&report(&cut), &report(&done)).agrees);
+        assert!(compare(&report(&done), &report(&cut)).agrees);
+        let ran_on = InsertionRun {
+            duration_s: 10.0,
+            ticks: 100_000,
+            ..cut
+        };
+        let a = compare(&report(&ran_on), &report(&done));
+        assert!(!a.agrees, "{a:?}");
     }
 }

@@ -7,9 +7,7 @@
 use super::{ServoBoard, Tick};
 use crate::rt;
 use afs_shared::insertion::rig::{InsertionRig, RigState};
-use afs_shared::msg::{
-    PegSample, PlantSample, ServoFlags, ServoSample, WorldSnapshot, WrenchSample,
-};
+use afs_shared::msg::{PegSample, PlantSample, ServoSample, WorldSnapshot, WrenchSample};
 use afs_shared::scenario::Scenario;
 use afs_shared::sensor::Wrench;
 use anyhow::Result;
@@ -82,29 +80,11 @@ impl ServoBoard {
         let Some(rig) = &self.peg else {
             return;
         };
-        let mut p = PlantSample::of_peg(rig, self.seq, now);
-        let mut s = ServoSample::of_peg(rig, self.seq, now, reading);
+        let p = PlantSample::of_peg(rig, self.seq, now);
+        let s = ServoSample::of_peg(rig, self.seq, now, reading);
         let mut g = PegSample::of_rig(rig, self.seq, now, used.is_some());
-        s.safe_reason = self.safe_reason;
-        if let Some((w, age)) = used {
-            s.flags |= ServoFlags::FORCE_VALID;
-            s.wrench_seq = w.seq;
-            s.wrench_sample_ns = w.sample_ns;
-            s.force_age_ns = age;
-        }
-        p.publish_ns = rt::monotonic_ns();
-        if let Some(world) = &self.ports.world {
-            let mut snap = self.snapshot(p);
-            snap.insertion = (&rig.state()).into();
-            world.write(snap);
-        }
-        if self.ports.plant.send_copy(p).is_err() {
-            self.stats.publish_failures += 1;
-        }
-        s.publish_ns = rt::monotonic_ns();
-        if self.ports.servo.send_copy(s).is_err() {
-            self.stats.publish_failures += 1;
-        }
+        let state = (&rig.state()).into();
+        self.send(p, s, used, state);
         if let Some(out) = &self.ports.peg {
             g.publish_ns = rt::monotonic_ns();
             if out.send_copy(g).is_err() {
