@@ -369,24 +369,39 @@ fn servo_killed_or_frozen_resumes_the_world_and_its_controller() {
 /// the force limit, and the reference agrees.
 #[test]
 fn a_servo_killed_mid_insertion_resumes_it() {
+    killed_mid_insertion("pin", &[]);
+}
+
+/// The same with the three-joint arm carrying the wrist (`[sim.insertion] drive = "arm"`):
+/// the restarted servo resumes the arm too (joints, their servos' integrals, the interpolator).
+#[test]
+fn a_servo_killed_mid_insertion_resumes_the_arm() {
+    let stack = std::env::temp_dir().join(format!("afs-stack-arm-{}.toml", std::process::id()));
+    let base = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/stack.toml");
+    let text = std::fs::read_to_string(base).unwrap() + "\n[sim.insertion]\ndrive = \"arm\"\n";
+    std::fs::write(&stack, text).unwrap();
+    killed_mid_insertion("pia", &["--config", stack.to_str().unwrap()]);
+    std::fs::remove_file(&stack).unwrap();
+}
+
+fn killed_mid_insertion(name: &str, extra: &[&str]) {
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
-    let p = prefix("pin");
-    let (out, r) = chaos(
-        &p,
-        &[
-            "--scenario",
-            "insertion",
-            "--duration",
-            "6",
-            "--seed",
-            "1",
-            "--kills",
-            "2",
-            "--faults",
-            "kill-servo,freeze-servo",
-            "--in-turn",
-        ],
-    );
+    let p = prefix(name);
+    let mut args = vec![
+        "--scenario",
+        "insertion",
+        "--duration",
+        "6",
+        "--seed",
+        "1",
+        "--kills",
+        "2",
+        "--faults",
+        "kill-servo,freeze-servo",
+        "--in-turn",
+    ];
+    args.extend_from_slice(extra);
+    let (out, r) = chaos(&p, &args);
     assert_correct(&out, &r);
     assert_eq!(chaos_of(&r).injected, 2);
     let run = r.stack.insertion.as_ref().expect("the insertion's figures");

@@ -400,6 +400,11 @@ pub struct InsertionArgs {
     /// insertion: the controller [default: the set-up's, dither].
     #[arg(long, value_parser = ["dither", "no-dither", "search"])]
     pub method: Option<String>,
+    /// insertion: what positions the wrist's flange: `ideal` (exactly where commanded) or
+    /// `arm` (the three-joint arm with its dynamics under its joint servos) [default: the
+    /// set-up's, ideal].
+    #[arg(long, value_parser = ["ideal", "arm"])]
+    pub drive: Option<String>,
     /// insertion: every method at every point of the grid (c 0.01, 0.002, 0.0005 × μ 0.1,
     /// 0.3, 0.5 × chamfer 0.5 mm, none) over --seeds, instead of one fit and method; prints
     /// the table and plots success against clearance (insertion_grid.svg). Exits 1 where the
@@ -423,6 +428,11 @@ impl InsertionArgs {
                 .as_deref()
                 .and_then(afs_shared::insertion::controller::Method::parse)
                 .unwrap_or(base.method),
+            drive: self
+                .drive
+                .as_deref()
+                .and_then(afs_shared::insertion::drive::Drive::parse)
+                .unwrap_or(base.drive),
             ..*base
         }
     }

@@ -555,19 +555,39 @@ impl JointServo {
     ) -> Vector2<f64> {
         let mut tau = Vector2::zeros();
         for j in 0..2 {
-            let g = self.gains[j];
-            let e = q_d[j] - q[j];
-            let ed = qd_d[j] - qd[j];
-            let unsat = g.kp * e + g.kd * ed + g.ki * (self.integral[j] + e * dt) + feedforward[j];
-            let lim = self.torque_limit[j];
-            // Conditional integration: do not wind up further into saturation.
-            if self.integrating && (unsat.abs() <= lim || unsat.signum() != e.signum()) {
-                self.integral[j] += e * dt;
-            }
-            let out = g.kp * e + g.kd * ed + g.ki * self.integral[j] + feedforward[j];
-            tau[j] = out.clamp(-lim, lim);
+            let error = (q_d[j] - q[j], qd_d[j] - qd[j]);
+            tau[j] = self.gains[j].torque(
+                error,
+                (&mut self.integral[j], self.integrating),
+                feedforward[j],
+                self.torque_limit[j],
+                dt,
+            );
         }
         tau
+    }
+}
+
+impl PidGains {
+    /// One joint's torque for the position and rate errors `(e, ė)` plus `feedforward`,
+    /// saturated at ±`limit`. The integral of `e` (rad·s), while integrating, takes `e · dt`
+    /// unless that would wind it further into saturation (conditional integration); frozen, it
+    /// holds its torque.
+    pub fn torque(
+        &self,
+        (e, ed): (f64, f64),
+        (integral, integrating): (&mut f64, bool),
+        feedforward: f64,
+        limit: f64,
+        dt: f64,
+    ) -> f64 {
+        let unsat = self.kp * e + self.kd * ed + self.ki * (*integral + e * dt) + feedforward;
+        // Conditional integration: do not wind up further into saturation.
+        if integrating && (unsat.abs() <= limit || unsat.signum() != e.signum()) {
+            *integral += e * dt;
+        }
+        let out = self.kp * e + self.kd * ed + self.ki * *integral + feedforward;
+        out.clamp(-limit, limit)
     }
 }
 

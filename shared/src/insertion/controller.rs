@@ -312,6 +312,10 @@ impl Controller {
                     // where the peg is.
                     self.target[1] = inp.tip[1];
                     self.next(Phase::Find);
+                } else if self.in_bore(inp) {
+                    // In the bore without a touch: the initial errors were inside the
+                    // clearance. On from there as from the find phase.
+                    self.next(self.after_find());
                 }
             }
             Phase::Find | Phase::Align | Phase::Insert => {
@@ -355,12 +359,8 @@ impl Controller {
                     }
                 }
                 let depth = self.depth_m(inp.tip[1]);
-                // The search goes by its tip's centre; the others by the tip face's higher
-                // corner (the peg tilted by θ), in the bore once it is.
-                let tilt = if search { 0.0 } else { inp.tip[2].sin().abs() };
-                let upper = depth - 0.5 * p.peg_width_m * tilt;
-                if find && upper > self.in_hole_depth_m {
-                    self.next(if search { Phase::Insert } else { Phase::Align });
+                if find && self.in_bore(inp) {
+                    self.next(self.after_find());
                 }
                 if self.phase == Phase::Align && self.aligned(inp, dt) {
                     self.next(Phase::Insert);
@@ -394,6 +394,27 @@ impl Controller {
             out[0] = self.start_x + a * (tau * p.search_hz * self.t).sin();
         }
         (out, rate)
+    }
+
+    /// Far enough into the hole to leave the find phase: the search goes by its tip's centre,
+    /// the others by the tip face's higher corner (the peg tilted by θ).
+    fn in_bore(&self, inp: &Input) -> bool {
+        let tilt = if self.method == Method::Search {
+            0.0
+        } else {
+            inp.tip[2].sin().abs()
+        };
+        let upper = self.depth_m(inp.tip[1]) - 0.5 * self.params.peg_width_m * tilt;
+        upper > self.in_hole_depth_m
+    }
+
+    /// The phase after the find phase: the search inserts, the others align first.
+    fn after_find(&self) -> Phase {
+        if self.method == Method::Search {
+            Phase::Insert
+        } else {
+            Phase::Align
+        }
     }
 
     /// In the find phase: the walk towards the unsupported side. The contact's centre of

@@ -3,9 +3,10 @@
 //! conditions ([`whitney`]), the insertion controller and its baselines ([`controller`]), the
 //! contact state as the controller can know it ([`estimate`]), the three stepped together as a
 //! servo runs them ([`rig`]) and measured ([`monitor`]), and the arm with a wrist joint
-//! ([`scara`]; not yet driven).
+//! ([`scara`]) that can carry the wrist ([`drive`]).
 
 pub mod controller;
+pub mod drive;
 pub mod estimate;
 pub mod geometry;
 pub mod monitor;

@@ -144,7 +144,8 @@ impl InsertionMonitor {
                 Phase::Done => 3,
             };
             self.starts[i] = Some(start);
-            if i == 0 {
+            // The end of the approach: at the first contact, or in the bore untouched.
+            if self.contact_t.is_none() {
                 self.contact_t = Some(start);
             }
         }

@@ -149,6 +149,26 @@ const STUCK_M_PER_S: f64 = 1e-5;
 /// Slots: the peg's four corners, then the part's corners.
 pub const SLOTS: usize = 4 + MAX_CORNERS;
 
+/// The wrist's flange: where the wrist pulls the peg to, and what takes its reaction.
+pub trait Flange {
+    /// The tip pose the wrist pulls the peg's tip to (m, m, rad), and its rate.
+    fn pose(&self) -> ([f64; 3], [f64; 3]);
+    /// The wrist's reaction on the flange over a sub-step of `h` (s): a force (N) at the
+    /// flange's compliance centre and a pure moment (N·m).
+    fn react(&mut self, force: Vec2, moment_nm: f64, h: f64);
+}
+
+/// A flange exactly at its commanded pose: an ideal position-controlled arm.
+struct Commanded([f64; 3], [f64; 3]);
+
+impl Flange for Commanded {
+    fn pose(&self) -> ([f64; 3], [f64; 3]) {
+        (self.0, self.1)
+    }
+
+    fn react(&mut self, _force: Vec2, _moment_nm: f64, _h: f64) {}
+}
+
 /// The peg and the part.
 #[derive(Debug, Clone)]
 pub struct PegPlant {
@@ -246,8 +266,15 @@ impl PegPlant {
         self.truth = s.truth;
     }
 
-    /// Advances by `dt` with the wrist commanding the tip to `target` (x, y, θ) at `target_vel`.
+    /// Advances by `dt` with the wrist commanding the tip to `target` (x, y, θ) at `target_vel`:
+    /// a flange that is exactly where it is commanded.
     pub fn step(&mut self, target: [f64; 3], target_vel: [f64; 3], dt: f64) {
+        self.step_with(&mut Commanded(target, target_vel), dt);
+    }
+
+    /// Advances by `dt` with the wrist's flange `flange`, which takes the wrist's reaction
+    /// every sub-step.
+    pub fn step_with<F: Flange>(&mut self, flange: &mut F, dt: f64) {
         let n = (dt / self.substep_s).ceil().max(1.0) as usize;
         let h = dt / n as f64;
         let mut found = [Contact::default(); SLOTS];
@@ -261,7 +288,10 @@ impl PegPlant {
             );
             let (f, m) = self.contact_wrench(&found[..count], h);
             self.last_contact = (f, m);
-            let (wf, wm) = self.wrist_wrench(target, target_vel);
+            let (target, target_vel) = flange.pose();
+            let (wf, pure) = self.wrist_wrench(target, target_vel);
+            let com = Vec2::new(self.q[0], self.q[1]);
+            let wm = pure + cross(self.compliance_centre() - com, wf);
             self.last_wrist = (wf, wm);
             let p = &self.params;
             let acc = [
@@ -273,18 +303,24 @@ impl PegPlant {
                 *v += a * h;
                 *q += *v * h;
             }
+            flange.react(-wf, -pure, h);
         }
         self.truth = self.observe(&found[..count], count);
     }
 
-    /// The wrist's force at its compliance centre and its moment about the centre of mass.
+    /// The peg's compliance centre.
+    fn compliance_centre(&self) -> Vec2 {
+        let tip = self.tip_pose();
+        Vec2::new(tip[0], tip[1]) + peg_axes(tip[2]).0 * self.params.compliance_above_tip_m
+    }
+
+    /// The wrist's force at the peg's compliance centre and its pure moment (the rotational
+    /// spring and damper), pulling the peg towards the flange's pose.
     fn wrist_wrench(&self, target: [f64; 3], target_vel: [f64; 3]) -> (Vec2, f64) {
         let p = &self.params;
         let h = p.compliance_above_tip_m;
-        let centre = |x: f64, y: f64, th: f64| Vec2::new(x, y) + peg_axes(th).0 * h;
-        let tip = self.tip_pose();
-        let at = centre(tip[0], tip[1], tip[2]);
-        let want = centre(target[0], target[1], target[2]);
+        let at = self.compliance_centre();
+        let want = Vec2::new(target[0], target[1]) + peg_axes(target[2]).0 * h;
         let com = Vec2::new(self.q[0], self.q[1]);
         let r = at - com;
         let vel = Vec2::new(self.v[0], self.v[1]) + perp(r) * self.v[2];
@@ -300,7 +336,7 @@ impl PegPlant {
             k[1] * (want.y - at.y) + c_lin * (want_vel.y - vel.y),
         );
         let m = k[2] * (target[2] - self.q[2]) + c_rot * (target_vel[2] - self.v[2]);
-        (f, m + cross(r, f))
+        (f, m)
     }
 
     /// The contact forces' resultant on the peg and their moment about the centre of mass;

@@ -5,6 +5,7 @@
 //! insertion; its whole state goes into the world snapshot for a restarted servo.
 
 use super::controller::{Controller, ControllerParams, ControllerState, Input, Method, Phase};
+use super::drive::{ArmDrive, ArmDriveParams, ArmDriveState, Drive};
 use super::estimate::Estimator;
 use super::plant::{ContactState, PegParams, PegPlant, PegPlantState, PegTruth};
 use super::whitney::Fit;
@@ -36,6 +37,9 @@ pub struct InsertionOptions {
     pub time_limit_s: f64,
     /// The force limit, as a multiple of the commanded insertion force.
     pub force_limit_factor: f64,
+    /// What positions the wrist's flange: `ideal` (exactly where commanded) or `arm` (the
+    /// three-joint arm under its joint servos).
+    pub drive: Drive,
 }
 
 impl Default for InsertionOptions {
@@ -49,6 +53,7 @@ impl Default for InsertionOptions {
             method: Method::Dither,
             time_limit_s: 10.0,
             force_limit_factor: 3.0,
+            drive: Drive::Ideal,
         }
     }
 }
@@ -150,12 +155,15 @@ pub struct RigState {
     pub prev_tip_y_m: f64,
     /// The largest contact force so far (N).
     pub peak_force_n: f64,
+    /// The arm, when it drives the flange (zero otherwise).
+    pub arm: ArmDriveState,
 }
 
 /// The plant, the controller and the estimator of one insertion.
 #[derive(Debug, Clone)]
 pub struct InsertionRig {
     plant: PegPlant,
+    arm: Option<ArmDrive>,
     ctl: Controller,
     estimator: Estimator,
     estimated: ContactState,
@@ -176,8 +184,17 @@ impl InsertionRig {
         let (lateral, angle) = o.initial_errors(seed);
         let start = [lateral, 1e-3, angle];
         let chamfer_depth = g.chamfer_m / g.chamfer_angle_deg.to_radians().tan().max(1e-9);
+        let arm = match o.drive {
+            Drive::Ideal => None,
+            Drive::Arm => Some(ArmDrive::new(
+                ArmDriveParams::default(),
+                start,
+                params.compliance_above_tip_m,
+            )?),
+        };
         Ok(Self {
             plant: PegPlant::new(params, start),
+            arm,
             ctl: Controller::new(
                 o.controller_params(),
                 o.method,
@@ -205,8 +222,17 @@ impl InsertionRig {
     }
 
     /// The servo's part of a tick: the estimator and the controller on `reading`; the wrist's
-    /// commanded pose and rate.
+    /// commanded pose and rate; with the arm, its joint servos' torques for them.
     pub fn control(&mut self, reading: Option<Wrench>, dt: f64) -> ([f64; 3], [f64; 3]) {
+        let (target, rate) = self.command(reading, dt);
+        if let Some(arm) = &mut self.arm {
+            arm.servo(target, rate, dt);
+        }
+        (target, rate)
+    }
+
+    /// The estimator and the controller on `reading`.
+    fn command(&mut self, reading: Option<Wrench>, dt: f64) -> ([f64; 3], [f64; 3]) {
         let tip = self.plant.truth().pose;
         let speed = (tip[1] - self.prev_tip_y_m) / -dt;
         self.prev_tip_y_m = tip[1];
@@ -224,9 +250,13 @@ impl InsertionRig {
         }
     }
 
-    /// The world's part of a tick: the peg under the wrist commanded to `target` at `rate`.
+    /// The world's part of a tick: the peg under the wrist commanded to `target` at `rate`,
+    /// or, with the arm, under the wrist the arm carries with its servos' torques.
     pub fn advance(&mut self, target: [f64; 3], rate: [f64; 3], dt: f64) {
-        self.plant.step(target, rate, dt);
+        match &mut self.arm {
+            Some(arm) => self.plant.step_with(arm, dt),
+            None => self.plant.step(target, rate, dt),
+        }
         self.time_s += dt;
         self.peak_force_n = self.peak_force_n.max(self.plant.truth().force.norm());
     }
@@ -291,6 +321,7 @@ impl InsertionRig {
             estimated: self.estimated,
             prev_tip_y_m: self.prev_tip_y_m,
             peak_force_n: self.peak_force_n,
+            arm: self.arm.as_ref().map(ArmDrive::state).unwrap_or_default(),
         }
     }
 
@@ -303,6 +334,9 @@ impl InsertionRig {
         self.estimated = s.estimated;
         self.prev_tip_y_m = s.prev_tip_y_m;
         self.peak_force_n = s.peak_force_n;
+        if let Some(arm) = &mut self.arm {
+            arm.restore(&s.arm);
+        }
     }
 }
 
@@ -315,7 +349,16 @@ mod tests {
     /// does: what a restarted servo relies on.
     #[test]
     fn a_restored_rig_carries_on_exactly() {
-        let o = InsertionOptions::default();
+        for drive in [Drive::Ideal, Drive::Arm] {
+            restored_rig_carries_on(&InsertionOptions {
+                drive,
+                ..InsertionOptions::default()
+            });
+        }
+    }
+
+    fn restored_rig_carries_on(o: &InsertionOptions) {
+        let o = *o;
         let mut a = InsertionRig::new(&o, 3).unwrap();
         let dt = 1e-4;
         let reading = |r: &InsertionRig, k: u32| {
@@ -344,19 +387,50 @@ mod tests {
         assert_ne!(fresh.state(), b.state());
     }
 
-    /// Without force data the controller stands still and the wrist holds its pose.
+    /// Without force data the controller stands still and the wrist (on either drive) holds
+    /// its pose.
     #[test]
     fn without_force_data_the_wrist_holds() {
-        let o = InsertionOptions::default();
-        let mut r = InsertionRig::new(&o, 1).unwrap();
-        let before = r.target();
-        for _ in 0..5000 {
-            r.step(None, 1e-4);
+        for drive in [Drive::Ideal, Drive::Arm] {
+            let o = InsertionOptions {
+                drive,
+                ..InsertionOptions::default()
+            };
+            let mut r = InsertionRig::new(&o, 1).unwrap();
+            let before = r.target();
+            for _ in 0..5000 {
+                r.step(None, 1e-4);
+            }
+            assert_eq!(r.target(), before);
+            assert_eq!(r.phase(), Phase::Approach);
+            let tip = r.truth().pose;
+            assert!((tip[1] - before[1]).abs() < 1e-6, "{tip:?} vs {before:?}");
         }
-        assert_eq!(r.target(), before);
-        assert_eq!(r.phase(), Phase::Approach);
-        let tip = r.truth().pose;
-        assert!((tip[1] - before[1]).abs() < 1e-6, "{tip:?} vs {before:?}");
+    }
+
+    /// A peg that enters the bore without a touch (its errors inside the clearance: seed 401
+    /// on the arm) is inserted to depth, not driven on at the approach speed until the hole's
+    /// bottom stops it 5 mm further down.
+    #[test]
+    fn a_peg_that_drops_in_untouched_stops_at_depth() {
+        for drive in [Drive::Ideal, Drive::Arm] {
+            let o = InsertionOptions {
+                lateral_mm: Some(0.0),
+                angle_deg: Some(0.0),
+                drive,
+                ..InsertionOptions::default()
+            };
+            let mut rig = InsertionRig::new(&o, 1).unwrap();
+            let mut deepest = 0.0f64;
+            while rig.time_s() < o.time_limit_s {
+                rig.step(Some(rig.sensor_wrench()), 1e-4);
+                deepest = deepest.max(rig.truth().depth_m);
+            }
+            assert_eq!(rig.phase(), Phase::Done, "{drive:?}");
+            assert!(!rig.failed());
+            let target = ControllerParams::default().target_depth_m;
+            assert!(deepest < target + 0.5e-3, "{drive:?}: {deepest} m");
+        }
     }
 
     /// At the tightest fit (c = 0.0005, wedging angle 0.1°) a peg tilted 1.4° goes in: the

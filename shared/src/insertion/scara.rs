@@ -92,7 +92,7 @@ impl Scara {
     }
 
     /// The Jacobian of a point `along` the wrist link: column j is ẑ × (point − joint j).
-    fn point_jacobian(&self, q: Vector3<f64>, along: f64) -> [Vec2; 3] {
+    pub(crate) fn point_jacobian(&self, q: Vector3<f64>, along: f64) -> [Vec2; 3] {
         let pts = self.points(q, along);
         [0, 1, 2].map(|j| perp(pts[3] - pts[j]))
     }

@@ -302,11 +302,16 @@ wire_struct! {
         pub peak_force_n: f64,
         /// The last estimated contact state.
         pub estimated_state: u32,
-        /// Reserved (0).
-        pub reserved: u32,
+        /// 1 when the three-joint arm drives the flange (`drive = "arm"`), 0 otherwise.
+        pub arm_driven: u32,
+        /// The arm's joint angles (rad), rates (rad/s), its servos' integrals (rad·s), last
+        /// commanded joint angles and rates, and the servo interpolator's tool pose (m, m, rad)
+        /// and rate (m/s, m/s, rad/s), in that order; zero when the flange is ideal.
+        pub arm: [[f64; 3]; 7],
     }
 }
 
+use crate::insertion::drive::ArmDriveState;
 use crate::insertion::geometry::Feature;
 
 const FEATURES: [Feature; 4] = [
@@ -332,7 +337,7 @@ fn touching_of(code: i32) -> Option<(Feature, i8)> {
 
 impl From<&RigState> for InsertionState {
     fn from(s: &RigState) -> Self {
-        let (p, c) = (&s.plant, &s.controller);
+        let (p, c, a) = (&s.plant, &s.controller, &s.arm);
         Self {
             active: 1,
             phase: phase_code(c.phase),
@@ -355,7 +360,8 @@ impl From<&RigState> for InsertionState {
             prev_tip_y_m: s.prev_tip_y_m,
             peak_force_n: s.peak_force_n,
             estimated_state: state_code(s.estimated),
-            reserved: 0,
+            arm_driven: u32::from(s.arm != ArmDriveState::default()),
+            arm: [a.q, a.v, a.integral, a.q_d, a.v_d, a.pose_d, a.rate_d],
         }
     }
 }
@@ -388,6 +394,15 @@ impl From<&InsertionState> for RigState {
             estimated: state_of(m.estimated_state),
             prev_tip_y_m: m.prev_tip_y_m,
             peak_force_n: m.peak_force_n,
+            arm: ArmDriveState {
+                q: m.arm[0],
+                v: m.arm[1],
+                integral: m.arm[2],
+                q_d: m.arm[3],
+                v_d: m.arm[4],
+                pose_d: m.arm[5],
+                rate_d: m.arm[6],
+            },
         }
     }
 }
@@ -395,6 +410,7 @@ impl From<&InsertionState> for RigState {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::insertion::drive::Drive;
     use crate::insertion::rig::{InsertionOptions, InsertionRig};
 
     /// Every code goes there and back; a rig's state mid-insertion survives the wire bit for
@@ -419,13 +435,21 @@ mod tests {
             }
         }
         assert_eq!(touching_of(touching_code(None)), None);
-        let mut rig = InsertionRig::new(&InsertionOptions::default(), 5).unwrap();
-        while rig.truth().contacts < 2 {
-            let w = rig.sensor_wrench();
-            rig.step(Some(w), 1e-4);
-            assert!(rig.time_s() < 10.0);
+        for drive in [Drive::Ideal, Drive::Arm] {
+            let o = InsertionOptions {
+                drive,
+                ..InsertionOptions::default()
+            };
+            let mut rig = InsertionRig::new(&o, 5).unwrap();
+            while rig.truth().contacts < 2 {
+                let w = rig.sensor_wrench();
+                rig.step(Some(w), 1e-4);
+                assert!(rig.time_s() < 10.0);
+            }
+            let s = rig.state();
+            let m = InsertionState::from(&s);
+            assert_eq!(m.arm_driven, u32::from(drive == Drive::Arm), "{drive:?}");
+            assert_eq!(RigState::from(&m), s);
         }
-        let s = rig.state();
-        assert_eq!(RigState::from(&InsertionState::from(&s)), s);
     }
 }
