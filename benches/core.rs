@@ -10,9 +10,14 @@
 //! two probes of 2 000 samples, the size the servo sends at 1 kHz). `insertion_control_tick`
 //! is the insertion servo's tick (contact-state estimator and insertion controller) half-way
 //! into the hole; `insertion_rig_tick` adds the peg's plant (its contact sub-steps).
+//! `insertion_arm_control_tick` and `insertion_arm_rig_tick` are the same with the three-joint
+//! arm carrying the wrist (`drive = "arm"`): the servo's tick adds the arm's joint servos
+//! (interpolator, inverse kinematics, Jacobian, inverse dynamics, three PIDs), the plant's the
+//! arm's dynamics in every sub-step.
 
 use afs_shared::friction::FrictionLaw;
 use afs_shared::insertion::controller::Phase;
+use afs_shared::insertion::drive::Drive;
 use afs_shared::insertion::rig::{InsertionOptions, InsertionRig};
 use afs_shared::servo::ServoInput;
 use afs_shared::sim::{Lockstep, SimConfig};
@@ -35,9 +40,14 @@ fn running_sim() -> Lockstep {
     sim
 }
 
-/// An insertion (default fit, seed 1) run on noiseless readings until the peg is 5 mm in.
-fn inserting_rig() -> InsertionRig {
-    let mut rig = InsertionRig::new(&InsertionOptions::default(), 1).expect("default insertion");
+/// An insertion (default fit, seed 1, the flange driven by `drive`) run on noiseless readings
+/// until the peg is 5 mm in.
+fn inserting_rig(drive: Drive) -> InsertionRig {
+    let o = InsertionOptions {
+        drive,
+        ..InsertionOptions::default()
+    };
+    let mut rig = InsertionRig::new(&o, 1).expect("default insertion");
     while !(rig.phase() == Phase::Insert && rig.truth().depth_m > 0.005) {
         rig.step(Some(rig.sensor_wrench()), 1e-4);
         assert!(rig.time_s() < 10.0, "the insertion never got 5 mm in");
@@ -123,22 +133,24 @@ fn benches(c: &mut Criterion) {
 
     // Each iteration one tick from the same state half-way in (a rig left running would reach
     // the depth and idle there).
-    let mid = inserting_rig();
-    let reading = Some(mid.sensor_wrench());
-    c.bench_function("insertion_control_tick", |b| {
-        b.iter_batched_ref(
-            || mid.clone(),
-            |r| black_box(r.control(black_box(reading), 1e-4)),
-            BatchSize::SmallInput,
-        )
-    });
-    c.bench_function("insertion_rig_tick", |b| {
-        b.iter_batched_ref(
-            || mid.clone(),
-            |r| r.step(black_box(reading), 1e-4),
-            BatchSize::SmallInput,
-        )
-    });
+    for (drive, name) in [(Drive::Ideal, "insertion"), (Drive::Arm, "insertion_arm")] {
+        let mid = inserting_rig(drive);
+        let reading = Some(mid.sensor_wrench());
+        c.bench_function(&format!("{name}_control_tick"), |b| {
+            b.iter_batched_ref(
+                || mid.clone(),
+                |r| black_box(r.control(black_box(reading), 1e-4)),
+                BatchSize::SmallInput,
+            )
+        });
+        c.bench_function(&format!("{name}_rig_tick"), |b| {
+            b.iter_batched_ref(
+                || mid.clone(),
+                |r| r.step(black_box(reading), 1e-4),
+                BatchSize::SmallInput,
+            )
+        });
+    }
 
     let law = FrictionLaw::THESIS;
     c.bench_function("friction_cycle_closed_form", |b| {

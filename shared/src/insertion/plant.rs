@@ -289,9 +289,7 @@ impl PegPlant {
             let (f, m) = self.contact_wrench(&found[..count], h);
             self.last_contact = (f, m);
             let (target, target_vel) = flange.pose();
-            let (wf, pure) = self.wrist_wrench(target, target_vel);
-            let com = Vec2::new(self.q[0], self.q[1]);
-            let wm = pure + cross(self.compliance_centre() - com, wf);
+            let (wf, pure, wm) = self.wrist_wrench(target, target_vel);
             self.last_wrist = (wf, wm);
             let p = &self.params;
             let acc = [
@@ -308,18 +306,14 @@ impl PegPlant {
         self.truth = self.observe(&found[..count], count);
     }
 
-    /// The peg's compliance centre.
-    fn compliance_centre(&self) -> Vec2 {
-        let tip = self.tip_pose();
-        Vec2::new(tip[0], tip[1]) + peg_axes(tip[2]).0 * self.params.compliance_above_tip_m
-    }
-
-    /// The wrist's force at the peg's compliance centre and its pure moment (the rotational
-    /// spring and damper), pulling the peg towards the flange's pose.
-    fn wrist_wrench(&self, target: [f64; 3], target_vel: [f64; 3]) -> (Vec2, f64) {
+    /// The wrist's force at the peg's compliance centre, its pure moment (the rotational
+    /// spring and damper) and their moment about the centre of mass, pulling the peg towards
+    /// the flange's pose.
+    fn wrist_wrench(&self, target: [f64; 3], target_vel: [f64; 3]) -> (Vec2, f64, f64) {
         let p = &self.params;
         let h = p.compliance_above_tip_m;
-        let at = self.compliance_centre();
+        let tip = self.tip_pose();
+        let at = Vec2::new(tip[0], tip[1]) + peg_axes(tip[2]).0 * h;
         let want = Vec2::new(target[0], target[1]) + peg_axes(target[2]).0 * h;
         let com = Vec2::new(self.q[0], self.q[1]);
         let r = at - com;
@@ -336,7 +330,7 @@ impl PegPlant {
             k[1] * (want.y - at.y) + c_lin * (want_vel.y - vel.y),
         );
         let m = k[2] * (target[2] - self.q[2]) + c_rot * (target_vel[2] - self.v[2]);
-        (f, m)
+        (f, m, m + cross(r, f))
     }
 
     /// The contact forces' resultant on the peg and their moment about the centre of mass;
