@@ -254,6 +254,39 @@ pub fn generate(cfg: &SimConfig, solref: Option<ContactSolref>) -> String {
     x
 }
 
+/// The three-joint arm of [`Scara`](crate::insertion::scara::Scara) as MJCF, for checking
+/// MuJoCo's dynamics of it against the closed form (docs/insertion.md, *The arm*): links 1 and
+/// 2 as [`link_bodies`] makes them, the wrist link a third body on a hinge at link 2's end with
+/// its mass at `com_m` and its inertia, the site `tool` at its tool point. No gravity, no
+/// damping, no contact: the insertion's peg and hole are not in MuJoCo yet.
+pub fn scara(arm: &ArmParams, wrist: &crate::insertion::scara::WristParams, dt: f64) -> String {
+    let [b1, b2] = link_bodies(arm);
+    let body = |name: &str, pos: f64, b: &BodyInertia| {
+        let i = b.inertia_kg_m2.max(1e-9);
+        format!(
+            "<body name=\"{name}\" pos=\"{pos} 0 0\"><joint name=\"{name}\" type=\"hinge\" \
+             axis=\"0 0 1\"/><inertial pos=\"{} 0 0\" mass=\"{}\" diaginertia=\"{i} {i} {i}\"/>",
+            b.com_m,
+            b.mass_kg.max(1e-9)
+        )
+    };
+    let w = BodyInertia {
+        mass_kg: wrist.mass_kg,
+        com_m: wrist.com_m,
+        inertia_kg_m2: wrist.inertia_kg_m2,
+    };
+    format!(
+        "<mujoco model=\"afs-scara\">\n  <compiler angle=\"radian\" inertiafromgeom=\"false\"/>\n  \
+         <option timestep=\"{dt:e}\" gravity=\"0 0 0\" integrator=\"Euler\"/>\n  <worldbody>\n    \
+         {}{}{}<site name=\"{}\" pos=\"{} 0 0\"/></body></body></body>\n  </worldbody>\n</mujoco>\n",
+        body("link1", 0.0, &b1),
+        body("link2", arm.link1_length_m, &b2),
+        body("wrist", arm.link2_length_m, &w),
+        names::TOOL_SITE,
+        wrist.length_m,
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -14,6 +14,8 @@ mod mujoco;
 #[cfg(feature = "mujoco")]
 mod mujoco_box;
 #[cfg(feature = "mujoco")]
+mod mujoco_wrist;
+#[cfg(feature = "mujoco")]
 mod user;
 pub use boxes::BoxWorld;
 #[cfg(feature = "mujoco")]
