@@ -319,6 +319,7 @@ fn the_dither_method_inserts_where_its_baseline_does_not() {
         assert!(c.pass, "{}", c.line());
     }
     assert!(ok.summary.run.inserted && ok.summary.run.depth_mm >= 15.0);
+    assert_eq!((ok.summary.method, ok.summary.drive), ("dither", "ideal"));
     let baseline = run(Method::NoDither);
     let inserted = afs_shared::check::find(&baseline.checks, "inserted").unwrap();
     assert!(!inserted.pass, "{}", inserted.line());
@@ -343,6 +344,7 @@ fn bad_insertion_options_are_refused_by_name() {
         ("--lateral-mm", "-9", "insertion.lateral_mm"),
         ("--angle-deg", "inf", "insertion.angle_deg"),
         ("--plant", "mujoco", "built-in plant only"),
+        ("--drive", "wrist", "--drive"),
     ] {
         let out = afs()
             .args(["experiment", "insertion", flag, value])

@@ -17,6 +17,8 @@ pub use crate::insertion::rig::{InsertionOptions, InsertionRig};
 pub struct InsertionSummary {
     /// The controller.
     pub method: &'static str,
+    /// What positions the wrist's flange: `ideal` or `arm`.
+    pub drive: &'static str,
     /// Clearance ratio, μ, chamfer (mm).
     pub clearance_ratio: f64,
     /// μ.
@@ -92,6 +94,7 @@ pub fn insertion(opts: &Options) -> Result<Outcome<InsertionSummary>, Experiment
         simulated_s: rig.time_s(),
         summary: InsertionSummary {
             method: o.method.name(),
+            drive: o.drive.name(),
             clearance_ratio: o.clearance_ratio,
             mu: o.mu,
             chamfer_mm: o.chamfer_mm,
@@ -105,13 +108,13 @@ pub fn insertion(opts: &Options) -> Result<Outcome<InsertionSummary>, Experiment
     })
 }
 
-/// Insertion runs on the built-in plant only (the wrist is not in MuJoCo's model yet).
+/// Insertion runs on the built-in plant only (the peg and the hole are not MuJoCo contacts yet).
 fn check_world(opts: &Options) -> Result<(), ConfigError> {
     if opts.base.world.kind != crate::world::WorldKind::Builtin {
         return Err(ConfigError::rule(
             "world.kind",
-            "is `mujoco`; insertion runs on the built-in plant only: the wrist is not in \
-             MuJoCo's generated model yet (docs/insertion.md); run it without --plant",
+            "is `mujoco`; insertion runs on the built-in plant only: the peg and the hole are \
+             not MuJoCo contacts yet (docs/insertion.md); run it without --plant",
         ));
     }
     Ok(())
