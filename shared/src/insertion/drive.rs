@@ -152,10 +152,14 @@ impl ArmDrive {
         compliance_above_tip_m: f64,
     ) -> Result<Self, ConfigError> {
         let scara = Scara::new(p.arm, p.wrist);
-        let at = |name: &str, why: String| ConfigError::rule(name, why);
         let q = scara
             .inverse(Self::arm_pose(&p, tip_pose), p.elbow)
-            .map_err(|e| at("insertion arm hole_at_m", format!("the start is {e}")))?;
+            .map_err(|e| {
+                ConfigError::rule(
+                    "insertion.drive",
+                    format!("is `arm`, and the arm cannot reach the peg's start: {e}"),
+                )
+            })?;
         let m = scara.mass_matrix(q);
         let gains = [0, 1, 2].map(|j| {
             tune_pid_for_bandwidth(
@@ -242,8 +246,9 @@ impl ArmDrive {
 
     /// The servo's interpolator: the tool pose it follows moves towards `target` at `rate`
     /// plus a correction that closes the gap in `interpolator_s`, no faster than a stop at the
-    /// largest acceleration allows; its speed and its acceleration are bounded. A step in the command (the
-    /// controller's snap of its lead, the dither's start) becomes a ramp the arm can follow.
+    /// largest acceleration allows; its speed and its acceleration are bounded. A step in the
+    /// command (the controller's snap of its lead, the dither's start) becomes a ramp the arm
+    /// can follow.
     fn interpolate(&mut self, target: [f64; 3], rate: [f64; 3], dt: f64) {
         let s = &mut self.s;
         let [lin, ang] = self.p.max_acceleration;

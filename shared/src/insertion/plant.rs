@@ -314,11 +314,11 @@ impl PegPlant {
         let h = p.compliance_above_tip_m;
         let tip = self.tip_pose();
         let at = Vec2::new(tip[0], tip[1]) + peg_axes(tip[2]).0 * h;
-        let want = Vec2::new(target[0], target[1]) + peg_axes(target[2]).0 * h;
+        let (axis_d, _) = peg_axes(target[2]);
+        let want = Vec2::new(target[0], target[1]) + axis_d * h;
         let com = Vec2::new(self.q[0], self.q[1]);
         let r = at - com;
         let vel = Vec2::new(self.v[0], self.v[1]) + perp(r) * self.v[2];
-        let (axis_d, _) = peg_axes(target[2]);
         let want_vel = Vec2::new(target_vel[0], target_vel[1]) + perp(axis_d * h) * target_vel[2];
         let k = p.wrist_stiffness;
         let z = p.wrist_damping_ratio;
