@@ -249,10 +249,13 @@ fn a_killed_sensor_board_gets_its_device_back() {
         .output()
         .unwrap();
     let r = run_report(&out);
+    // The agreement's figures with the failure: a lockstep disagreement here was seen once
+    // (2026-12-03) and did not come back in the next runs.
     assert!(
         out.status.success() && r.passed,
-        "{}\n{}",
+        "{}\n{:#?}\n{}",
         failed(&r),
+        r.agreement,
         String::from_utf8_lossy(&out.stderr)
     );
     let sensor = process(&r, "sensor");
