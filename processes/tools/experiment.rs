@@ -405,6 +405,11 @@ pub struct InsertionArgs {
     /// set-up's, ideal].
     #[arg(long, value_parser = ["ideal", "arm"])]
     pub drive: Option<String>,
+    /// insertion: what the robot knows of the part's orientation: `known` (a fixtured part)
+    /// or `unknown` (its frame turned by the angle error; the controller estimates the face's
+    /// tangent) [default: the set-up's, known].
+    #[arg(long, value_parser = ["known", "unknown"])]
+    pub part_frame: Option<String>,
     /// insertion: every method at every point of the grid (c 0.01, 0.002, 0.0005 × μ 0.1,
     /// 0.3, 0.5 × chamfer 0.5 mm, none) over --seeds, instead of one fit and method; prints
     /// the table and plots success against clearance (insertion_grid.svg). Exits 1 where the
@@ -433,6 +438,11 @@ impl InsertionArgs {
                 .as_deref()
                 .and_then(afs_shared::insertion::drive::Drive::parse)
                 .unwrap_or(base.drive),
+            part_frame: self
+                .part_frame
+                .as_deref()
+                .and_then(afs_shared::insertion::rig::PartFrame::parse)
+                .unwrap_or(base.part_frame),
             ..*base
         }
     }

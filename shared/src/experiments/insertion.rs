@@ -29,6 +29,9 @@ pub struct InsertionSummary {
     pub lateral_error_mm: f64,
     /// Initial angle error (deg).
     pub angle_error_deg: f64,
+    /// The error of the face's tangent as the controller estimated it at the end (deg): the
+    /// angle error itself when it never probed the face (docs/insertion.md).
+    pub face_error_deg: f64,
     /// Whitney's wedging angle for the fit (deg).
     pub wedging_angle_deg: f64,
     /// The insertion's figures (`InsertionRun`: inserted, time, peak force, depth, jams and
@@ -100,6 +103,7 @@ pub fn insertion(opts: &Options) -> Result<Outcome<InsertionSummary>, Experiment
             chamfer_mm: o.chamfer_mm,
             lateral_error_mm: lateral * 1e3,
             angle_error_deg: angle.to_degrees(),
+            face_error_deg: rig.face_error_rad().to_degrees(),
             wedging_angle_deg: fit.wedging_angle_rad().to_degrees(),
             run,
         },

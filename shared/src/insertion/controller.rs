@@ -13,6 +13,7 @@
 //!   lateral sweep of growing amplitude about the start, passive compliance only (the wrist's),
 //!   no estimation.
 
+use super::face::{FaceParams, FaceProbe, FaceState};
 use serde::{Deserialize, Serialize};
 
 /// Which controller.
@@ -134,6 +135,11 @@ pub struct ControllerParams {
     pub search_growth_m_per_s: f64,
     /// Search's largest amplitude (m).
     pub search_max_m: f64,
+    /// Bandwidth of the loop that turns the peg square to the face as estimated, while
+    /// finding the hole (Hz).
+    pub tilt_bandwidth_hz: f64,
+    /// The face's tangent estimate from the find phase's dither.
+    pub face: FaceParams,
 }
 
 impl Default for ControllerParams {
@@ -169,6 +175,8 @@ impl Default for ControllerParams {
             search_hz: 0.3,
             search_growth_m_per_s: 1e-3,
             search_max_m: 3e-3,
+            tilt_bandwidth_hz: 1.0,
+            face: FaceParams::default(),
         }
     }
 }
@@ -202,6 +210,8 @@ pub struct ControllerState {
     pub aligned_s: f64,
     /// How long the contact force has been below the loss threshold (s).
     pub lost_s: f64,
+    /// The face's tangent estimate.
+    pub face: FaceState,
 }
 
 /// The controller.
@@ -224,6 +234,9 @@ pub struct Controller {
     aligned_s: f64,
     /// How long the contact force has been below `contact_lost_n` (s).
     lost_s: f64,
+    /// The face's tangent, the robot's belief (its frame's x axis) until the find phase's
+    /// dither has measured it.
+    face: FaceProbe,
 }
 
 impl Controller {
@@ -254,6 +267,7 @@ impl Controller {
             phase_t: 0.0,
             lost_s: 0.0,
             aligned_s: 0.0,
+            face: FaceProbe::new(params.face, params.peg_width_m, 0.0),
         }
     }
 
@@ -278,6 +292,7 @@ impl Controller {
             phase_t: self.phase_t,
             aligned_s: self.aligned_s,
             lost_s: self.lost_s,
+            face: self.face.state(),
         }
     }
 
@@ -290,6 +305,7 @@ impl Controller {
         self.phase_t = s.phase_t;
         self.aligned_s = s.aligned_s;
         self.lost_s = s.lost_s;
+        self.face.restore(&s.face);
     }
 
     /// Depth of the tip below the face (m).
@@ -297,12 +313,14 @@ impl Controller {
         self.face_y - tip_y
     }
 
-    /// One tick of `dt`: the wrist's commanded pose and rate.
+    /// One tick of `dt`: the wrist's commanded pose and rate, both in the robot's frame, from
+    /// `inp` in the robot's frame. The loops work in the part's frame as estimated (the robot's
+    /// turned by the face's estimated tangent angle).
     pub fn step(&mut self, inp: &Input, dt: f64) -> ([f64; 3], [f64; 3]) {
         self.t += dt;
         self.phase_t += dt;
         let p = self.params;
-        let tau = std::f64::consts::TAU;
+        let pin = self.to_part(inp);
         let mut rate = [0.0; 3];
         match self.phase {
             Phase::Approach => {
@@ -310,71 +328,25 @@ impl Controller {
                 if inp.force[0].hypot(inp.force[1]) > p.contact_n {
                     // The wrist's lead on the peg would press on: start the force loop from
                     // where the peg is.
-                    self.target[1] = inp.tip[1];
+                    let along = self.robot_to_part_xy(&self.target);
+                    let here = self.part_to_robot_xy([along[0], pin.tip[1]]);
+                    self.target = [here[0], here[1], self.target[2]];
                     self.next(Phase::Find);
-                } else if self.in_bore(inp) {
+                } else if self.in_bore(&pin) {
                     // In the bore without a touch: the initial errors were inside the
                     // clearance. On from there as from the find phase.
                     self.next(self.after_find());
                 }
             }
-            Phase::Find | Phase::Align | Phase::Insert => {
-                let find = self.phase == Phase::Find;
-                let search = self.method == Method::Search;
-                let force = match self.phase {
-                    Phase::Find => p.find_force_n,
-                    Phase::Align => p.align_force_n,
-                    _ => p.insertion_force_n,
-                };
-                rate[1] = -tau * p.force_bandwidth_hz / self.wrist[1] * (force - inp.force[1]);
-                if inp.force[0].hypot(inp.force[1]) < p.contact_lost_n {
-                    self.lost_s += dt;
-                } else {
-                    self.lost_s = 0.0;
-                }
-                let lost = find && self.lost_s >= p.contact_lost_s;
-                if lost {
-                    // Guarded descent, while finding the hole: the wrist's lead on a peg that
-                    // dropped off an edge would fling it into the next contact; take the lead
-                    // off once, where the loss is found, and go on down at the approach speed.
-                    // In the hole the peg is free between the walls most of the time, and the
-                    // insertion force's lead is what pushes it on.
-                    if self.lost_s - dt < p.contact_lost_s {
-                        // Only a lead worth the name: a peg hovering at the hole's mouth
-                        // loses and finds contact every dither period, and a snap each time
-                        // would undo the descent.
-                        for k in 0..2 {
-                            if (self.target[k] - inp.tip[k]).abs() > p.lead_snap_m {
-                                self.target[k] = inp.tip[k];
-                            }
-                        }
-                    }
-                    rate[1] = -p.approach_m_per_s;
-                } else if !search {
-                    if find {
-                        rate[0] = self.find_rate(inp);
-                    } else {
-                        rate[0] = tau * p.lateral_bandwidth_hz / self.wrist[0] * inp.force[0];
-                        rate[2] = tau * p.moment_bandwidth_hz / self.wrist[2] * inp.moment_nm;
-                    }
-                }
-                let depth = self.depth_m(inp.tip[1]);
-                if find && self.in_bore(inp) {
-                    self.next(self.after_find());
-                }
-                if self.phase == Phase::Align && self.aligned(inp, dt) {
-                    self.next(Phase::Insert);
-                }
-                if depth >= p.target_depth_m {
-                    self.next(Phase::Done);
-                }
-            }
+            Phase::Find | Phase::Align | Phase::Insert => rate = self.in_contact(inp, &pin, dt),
             Phase::Done => {}
         }
         let v = p.max_speed_m_per_s;
         rate[0] = rate[0].clamp(-v, v);
         rate[1] = rate[1].clamp(-v, v);
         rate[2] = rate[2].clamp(-p.max_tilt_rate_rad_per_s, p.max_tilt_rate_rad_per_s);
+        let xy = self.part_to_robot_xy([rate[0], rate[1]]);
+        let mut rate = [xy[0], xy[1], rate[2]];
         for (t, r) in self.target.iter_mut().zip(rate) {
             *t += r * dt;
         }
@@ -383,19 +355,118 @@ impl Controller {
             && matches!(self.phase, Phase::Find | Phase::Align | Phase::Insert)
         {
             // Along the motion the friction resists: across the face while finding, along the
-            // axis while inserting (thesis ch. 4: Aω above the nominal speed).
+            // axis while inserting (thesis ch. 4: Aω above the nominal speed), both as the
+            // face's tangent estimate turns them.
+            let tau = std::f64::consts::TAU;
             let w = tau * p.dither_hz;
-            let k = usize::from(self.phase != Phase::Find);
-            out[k] += p.dither_m * (w * self.phase_t).sin();
-            rate[k] += p.dither_m * w * (w * self.phase_t).cos();
+            let angle = if self.phase == Phase::Find {
+                self.face.angle()
+            } else {
+                self.face.angle() + 0.5 * std::f64::consts::PI
+            };
+            let (s, c) = (w * self.phase_t).sin_cos();
+            for (k, u) in [angle.cos(), angle.sin()].into_iter().enumerate() {
+                out[k] += p.dither_m * s * u;
+                rate[k] += p.dither_m * w * c * u;
+            }
         }
         if self.method == Method::Search && self.phase != Phase::Approach {
             let a = (p.search_growth_m_per_s * self.phase_t).min(p.search_max_m);
-            out[0] = self.start_x + a * (tau * p.search_hz * self.t).sin();
+            out[0] = self.start_x + a * (std::f64::consts::TAU * p.search_hz * self.t).sin();
         }
         (out, rate)
     }
 
+    /// The pressed phases' rates in the part's frame as estimated: the force loop along the
+    /// axis, the walk (find) or the lateral and moment loops (align, insert), the guard on a
+    /// lost contact, and the phase changes.
+    fn in_contact(&mut self, inp: &Input, pin: &Input, dt: f64) -> [f64; 3] {
+        let p = self.params;
+        let tau = std::f64::consts::TAU;
+        let mut rate = [0.0; 3];
+        let find = self.phase == Phase::Find;
+        let search = self.method == Method::Search;
+        let force = match self.phase {
+            Phase::Find => p.find_force_n,
+            Phase::Align => p.align_force_n,
+            _ => p.insertion_force_n,
+        };
+        rate[1] = -tau * p.force_bandwidth_hz / self.wrist[1] * (force - pin.force[1]);
+        if inp.force[0].hypot(inp.force[1]) < p.contact_lost_n {
+            self.lost_s += dt;
+        } else {
+            self.lost_s = 0.0;
+        }
+        let lost = find && self.lost_s >= p.contact_lost_s;
+        if find && !search && !lost && p.face.estimate {
+            self.face.sample(inp.force, inp.moment_nm, inp.tip, dt);
+        }
+        if lost {
+            // Guarded descent, while finding the hole: the wrist's lead on a peg that
+            // dropped off an edge would fling it into the next contact; take the lead
+            // off once, where the loss is found, and go on down at the approach speed.
+            // In the hole the peg is free between the walls most of the time, and the
+            // insertion force's lead is what pushes it on.
+            if self.lost_s - dt < p.contact_lost_s {
+                // Only a lead worth the name: a peg hovering at the hole's mouth
+                // loses and finds contact every dither period, and a snap each time
+                // would undo the descent.
+                for k in 0..2 {
+                    if (self.target[k] - inp.tip[k]).abs() > p.lead_snap_m {
+                        self.target[k] = inp.tip[k];
+                    }
+                }
+            }
+            rate[1] = -p.approach_m_per_s;
+        } else if !search {
+            if find {
+                rate[0] = self.find_rate(pin);
+                // Square to the face as estimated: the tilt against the face's normal.
+                rate[2] = -tau * p.tilt_bandwidth_hz * pin.tip[2];
+            } else {
+                rate[0] = tau * p.lateral_bandwidth_hz / self.wrist[0] * pin.force[0];
+                rate[2] = tau * p.moment_bandwidth_hz / self.wrist[2] * pin.moment_nm;
+            }
+        }
+        let depth = self.depth_m(pin.tip[1]);
+        if find && self.in_bore(pin) {
+            self.next(self.after_find());
+        }
+        if self.phase == Phase::Align && self.aligned(pin, dt) {
+            self.next(Phase::Insert);
+        }
+        if depth >= p.target_depth_m {
+            self.next(Phase::Done);
+        }
+        rate
+    }
+
+    /// The face's estimated tangent angle in the robot's frame (rad).
+    pub fn face_angle(&self) -> f64 {
+        self.face.angle()
+    }
+
+    /// `inp` in the part's frame as estimated: the robot's frame turned by the face's
+    /// estimated tangent angle (about the robot's origin, the hole's nominal centre).
+    pub fn to_part(&self, inp: &Input) -> Input {
+        let f = self.robot_to_part_xy(&inp.force);
+        let x = self.robot_to_part_xy(&inp.tip);
+        Input {
+            force: f,
+            moment_nm: inp.moment_nm,
+            tip: [x[0], x[1], inp.tip[2] - self.face.angle()],
+        }
+    }
+
+    /// The first two entries of `v` (a vector in the robot's frame) in the part's frame.
+    fn robot_to_part_xy(&self, v: &[f64]) -> [f64; 2] {
+        turn([v[0], v[1]], -self.face.angle())
+    }
+
+    /// A vector in the part's frame in the robot's.
+    fn part_to_robot_xy(&self, v: [f64; 2]) -> [f64; 2] {
+        turn(v, self.face.angle())
+    }
     /// Far enough into the hole to leave the find phase: the search goes by its tip's centre,
     /// the others by the tip face's higher corner (the peg tilted by θ).
     fn in_bore(&self, inp: &Input) -> bool {
@@ -436,7 +507,7 @@ impl Controller {
         let dir = -x_c.signum();
         let lead =
             (p.walk_lead_over_friction * p.mu * p.find_force_n / self.wrist[0]).max(p.walk_lead_m);
-        if dir * (self.target[0] - inp.tip[0]) > lead {
+        if dir * (self.robot_to_part_xy(&self.target)[0] - inp.tip[0]) > lead {
             return 0.0;
         }
         p.walk_m_per_s * dir
@@ -462,98 +533,12 @@ impl Controller {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    const WRIST: [f64; 3] = [2e3, 2e3, 5.0];
-
-    fn at(force: [f64; 2], moment_nm: f64, tip: [f64; 3]) -> Input {
-        Input {
-            force,
-            moment_nm,
-            tip,
-        }
-    }
-
-    fn started(method: Method) -> Controller {
-        let mut c = Controller::new(
-            ControllerParams::default(),
-            method,
-            WRIST,
-            [0.0, 1e-3, 0.0],
-            0.5e-3,
-        );
-        // Contact: the approach ends where the peg is, without the wrist's lead.
-        let (target, _) = c.step(&at([0.0, 0.6], 0.0, [0.0, -1e-5, 0.0]), 1e-4);
-        assert_eq!(c.phase(), Phase::Find);
-        assert!((target[1] + 1e-5).abs() < 1e-6, "{target:?}");
-        c
-    }
-
-    #[test]
-    fn methods_parse_by_name() {
-        for m in Method::ALL {
-            assert_eq!(Method::parse(m.name()), Some(m));
-        }
-        assert_eq!(Method::parse("spiral"), None);
-    }
-
-    /// Pressed on the part with the centre of pressure 3 mm to the right of the tip, the peg
-    /// walks left (towards the unsupported side), at the walk speed; 3 mm to the left, right.
-    #[test]
-    fn the_walk_goes_away_from_the_support() {
-        for (x_c, sign) in [(3e-3, -1.0), (-3e-3, 1.0)] {
-            let mut c = started(Method::NoDither);
-            let f = 2.0;
-            let before = c.target;
-            c.step(&at([0.0, f], x_c * f, [0.0, -1e-5, 0.0]), 1e-3);
-            let moved = c.target[0] - before[0];
-            let want = sign * ControllerParams::default().walk_m_per_s * 1e-3;
-            assert!((moved - want).abs() < 1e-12, "{x_c}: {moved} vs {want}");
-        }
-    }
-
-    /// Contact lost for longer than `contact_lost_s`: the lead comes off once (the commanded
-    /// pose jumps to the peg), then the commanded pose goes down at the approach speed.
-    #[test]
-    fn a_lost_contact_takes_the_lead_off_once() {
-        let mut c = started(Method::Dither);
-        let p = ControllerParams::default();
-        c.target = [1e-3, -2e-3, 0.0];
-        let tip = [0.0, -0.4e-3, 0.0];
-        let dt = 1e-4;
-        let ticks = (p.contact_lost_s / dt).round() as usize;
-        for _ in 0..ticks - 1 {
-            c.step(&at([0.0, 0.0], 0.0, tip), dt);
-        }
-        assert!(c.target[1] < -1e-3, "not yet: {:?}", c.target);
-        c.step(&at([0.0, 0.0], 0.0, tip), dt);
-        assert!((c.target[0] - tip[0]).abs() < 1e-12);
-        assert!(
-            (c.target[1] - (tip[1] - p.approach_m_per_s * dt)).abs() < 1e-12,
-            "{:?}",
-            c.target
-        );
-        c.step(&at([0.0, 0.0], 0.0, tip), dt);
-        assert!((c.target[1] - (tip[1] - 2.0 * p.approach_m_per_s * dt)).abs() < 1e-12);
-    }
-
-    /// Past the chamfer the peg is in the hole: the dither method aligns before it inserts,
-    /// the search goes straight in.
-    #[test]
-    fn in_the_hole_dither_aligns_and_search_inserts() {
-        let deep = [0.0, -1.2e-3, 0.0];
-        let mut c = started(Method::Dither);
-        c.step(&at([0.0, 2.0], 0.0, deep), 1e-4);
-        assert_eq!(c.phase(), Phase::Align);
-        // Aligned: a moment below a tenth of r F_y for 0.1 s.
-        for _ in 0..1001 {
-            c.step(&at([0.0, 1.0], 1e-4, deep), 1e-4);
-        }
-        assert_eq!(c.phase(), Phase::Insert);
-        let mut s = started(Method::Search);
-        s.step(&at([0.0, 2.0], 0.0, deep), 1e-4);
-        assert_eq!(s.phase(), Phase::Insert);
-    }
+/// `v` turned by `angle` (rad, counter-clockwise).
+fn turn(v: [f64; 2], angle: f64) -> [f64; 2] {
+    let (s, c) = angle.sin_cos();
+    [c * v[0] - s * v[1], s * v[0] + c * v[1]]
 }
+
+#[cfg(test)]
+#[path = "controller_tests.rs"]
+mod tests;

@@ -8,6 +8,7 @@
 pub mod controller;
 pub mod drive;
 pub mod estimate;
+pub mod face;
 pub mod geometry;
 pub mod monitor;
 pub mod plant;

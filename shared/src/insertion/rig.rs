@@ -40,6 +40,38 @@ pub struct InsertionOptions {
     /// What positions the wrist's flange: `ideal` (exactly where commanded) or `arm` (the
     /// three-joint arm under its joint servos).
     pub drive: Drive,
+    /// What the robot knows of the part's orientation: `known` (a fixtured part: the peg's
+    /// tilt is measured against the hole's axis) or `unknown` (the robot's frame is turned by
+    /// the angle error, and the controller estimates the face's tangent).
+    pub part_frame: PartFrame,
+}
+
+/// What the robot knows of the part's orientation (docs/insertion.md, *The part's frame*).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PartFrame {
+    /// Known: the robot's frame is the part's.
+    #[default]
+    Known,
+    /// Unknown: the robot's frame is the part's turned by the seed's angle error.
+    Unknown,
+}
+
+impl PartFrame {
+    /// Its name in a set-up and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Known => "known",
+            Self::Unknown => "unknown",
+        }
+    }
+
+    /// The frame called `s`.
+    pub fn parse(s: &str) -> Option<Self> {
+        [Self::Known, Self::Unknown]
+            .into_iter()
+            .find(|d| d.name() == s)
+    }
 }
 
 impl Default for InsertionOptions {
@@ -54,6 +86,7 @@ impl Default for InsertionOptions {
             time_limit_s: 10.0,
             force_limit_factor: 3.0,
             drive: Drive::Ideal,
+            part_frame: PartFrame::Known,
         }
     }
 }
@@ -103,12 +136,15 @@ impl InsertionOptions {
         params
     }
 
-    /// The controller's settings: it knows μ as friction identification gives it.
+    /// The controller's settings: it knows μ as friction identification gives it, and
+    /// estimates the face's tangent when it does not know the part's orientation.
     pub fn controller_params(&self) -> ControllerParams {
-        ControllerParams {
+        let mut p = ControllerParams {
             mu: self.mu,
             ..ControllerParams::default()
-        }
+        };
+        p.face.estimate = self.part_frame == PartFrame::Unknown;
+        p
     }
 
     /// The contact force that ends an insertion as failed (N).
@@ -172,6 +208,46 @@ pub struct InsertionRig {
     peak_force_n: f64,
     limit_n: f64,
     initial: (f64, f64),
+    robot: RobotFrame,
+}
+
+/// The robot's frame in the part's: turned by `angle_rad` about the hole's centre on the
+/// face. The controller reads and commands in it; the plant and the truth are in the part's.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct RobotFrame {
+    angle_rad: f64,
+}
+
+impl RobotFrame {
+    /// A vector of the part's frame in the robot's.
+    fn vector_in(self, v: [f64; 2]) -> [f64; 2] {
+        let (s, c) = (-self.angle_rad).sin_cos();
+        [c * v[0] - s * v[1], s * v[0] + c * v[1]]
+    }
+
+    /// A vector of the robot's frame in the part's.
+    fn vector_out(self, v: [f64; 2]) -> [f64; 2] {
+        let (s, c) = self.angle_rad.sin_cos();
+        [c * v[0] - s * v[1], s * v[0] + c * v[1]]
+    }
+
+    /// A pose (or a pose's rate) of the part's frame in the robot's.
+    fn pose_in(self, p: [f64; 3]) -> [f64; 3] {
+        let v = self.vector_in([p[0], p[1]]);
+        [v[0], v[1], p[2] - self.angle_rad]
+    }
+
+    /// A pose of the robot's frame in the part's.
+    fn pose_out(self, p: [f64; 3]) -> [f64; 3] {
+        let v = self.vector_out([p[0], p[1]]);
+        [v[0], v[1], p[2] + self.angle_rad]
+    }
+
+    /// A pose's rate of the robot's frame in the part's.
+    fn rate_out(self, r: [f64; 3]) -> [f64; 3] {
+        let v = self.vector_out([r[0], r[1]]);
+        [v[0], v[1], r[2]]
+    }
 }
 
 impl InsertionRig {
@@ -183,6 +259,15 @@ impl InsertionRig {
         let g = params.geometry;
         let (lateral, angle) = o.initial_errors(seed);
         let start = [lateral, 1e-3, angle];
+        // Not knowing the part's orientation, the robot believes its peg square to the part:
+        // its frame is the part's turned by the angle error (docs/insertion.md, *The part's
+        // frame*).
+        let robot = RobotFrame {
+            angle_rad: match o.part_frame {
+                PartFrame::Known => 0.0,
+                PartFrame::Unknown => angle,
+            },
+        };
         let chamfer_depth = g.chamfer_m / g.chamfer_angle_deg.to_radians().tan().max(1e-9);
         let arm = match o.drive {
             Drive::Ideal => None,
@@ -199,7 +284,7 @@ impl InsertionRig {
                 o.controller_params(),
                 o.method,
                 params.wrist_stiffness,
-                start,
+                robot.pose_in(start),
                 chamfer_depth,
             ),
             estimator: Estimator::new(0.0, chamfer_depth, g.peg_width_m, o.mu),
@@ -209,6 +294,7 @@ impl InsertionRig {
             peak_force_n: 0.0,
             limit_n: o.force_limit_n(),
             initial: (lateral, angle),
+            robot,
         })
     }
 
@@ -239,14 +325,17 @@ impl InsertionRig {
         match reading {
             Some(w) => {
                 let inp = Input {
-                    force: [w.force.x, w.force.y],
+                    force: self.robot.vector_in([w.force.x, w.force.y]),
                     moment_nm: w.torque,
-                    tip,
+                    tip: self.robot.pose_in(tip),
                 };
-                self.estimated = self.estimator.update(&inp, speed, dt);
-                self.ctl.step(&inp, dt)
+                // The estimator knows what the controller knows: the part's frame as the
+                // face's tangent estimate gives it.
+                self.estimated = self.estimator.update(&self.ctl.to_part(&inp), speed, dt);
+                let (target, rate) = self.ctl.step(&inp, dt);
+                (self.robot.pose_out(target), self.robot.rate_out(rate))
             }
-            None => (self.ctl.target(), [0.0; 3]),
+            None => (self.target(), [0.0; 3]),
         }
     }
 
@@ -288,7 +377,7 @@ impl InsertionRig {
 
     /// The commanded pose without the dither.
     pub fn target(&self) -> [f64; 3] {
-        self.ctl.target()
+        self.robot.pose_out(self.ctl.target())
     }
 
     /// Time since the start (s).
@@ -309,6 +398,12 @@ impl InsertionRig {
     /// The seed's initial lateral (m) and angle (rad) errors.
     pub fn initial_errors(&self) -> (f64, f64) {
         self.initial
+    }
+
+    /// The error of the face's tangent as the controller estimates it (rad): 0 when the
+    /// estimate has found the part's orientation.
+    pub fn face_error_rad(&self) -> f64 {
+        self.ctl.face_angle() + self.robot.angle_rad
     }
 
     /// The whole state, for a restarted servo.
@@ -349,9 +444,14 @@ mod tests {
     /// does: what a restarted servo relies on.
     #[test]
     fn a_restored_rig_carries_on_exactly() {
-        for drive in [Drive::Ideal, Drive::Arm] {
+        for (drive, part_frame) in [
+            (Drive::Ideal, PartFrame::Known),
+            (Drive::Arm, PartFrame::Known),
+            (Drive::Ideal, PartFrame::Unknown),
+        ] {
             restored_rig_carries_on(&InsertionOptions {
                 drive,
+                part_frame,
                 ..InsertionOptions::default()
             });
         }
@@ -385,6 +485,33 @@ mod tests {
         // A fresh rig is elsewhere: the check can tell.
         let fresh = InsertionRig::new(&o, 3).unwrap();
         assert_ne!(fresh.state(), b.state());
+    }
+
+    /// The part turned by the seed's angle error and the robot not told: where the peg's
+    /// corner walks far enough on the face (seed 10: 1.83° turned), the face's tangent is
+    /// found to a hundredth of a degree before the peg reaches the hole; where it is told
+    /// (`known`) there is nothing to find.
+    #[test]
+    fn an_unknown_parts_face_is_found_from_the_corner_it_walks_on() {
+        for (part_frame, within_deg) in [(PartFrame::Unknown, 0.01), (PartFrame::Known, 0.0)] {
+            let o = InsertionOptions {
+                part_frame,
+                ..InsertionOptions::default()
+            };
+            let mut r = InsertionRig::new(&o, 10).unwrap();
+            assert!(r.initial_errors().1.to_degrees().abs() > 1.5);
+            let before = r.face_error_rad();
+            while matches!(r.phase(), Phase::Approach | Phase::Find) {
+                let w = r.sensor_wrench();
+                r.step(Some(w), 1e-4);
+                assert!(r.time_s() < 10.0, "never left the find phase");
+            }
+            let after = r.face_error_rad().to_degrees();
+            assert!(after.abs() <= within_deg, "{part_frame:?}: {after}°");
+            if part_frame == PartFrame::Unknown {
+                assert!((before - r.initial_errors().1).abs() < 1e-12, "{before}");
+            }
+        }
     }
 
     /// Without force data the controller stands still and the wrist (on either drive) holds

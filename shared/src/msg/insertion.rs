@@ -308,10 +308,41 @@ wire_struct! {
         /// commanded joint angles and rates, and the servo interpolator's tool pose (m, m, rad)
         /// and rate (m/s, m/s, rad/s), in that order; zero when the flange is ideal.
         pub arm: [[f64; 3]; 7],
+        /// The face's tangent estimate (the part's orientation unknown, docs/insertion.md):
+        /// its angle in the robot's frame (rad), the low-passed force (N) and moment (N·m),
+        /// the corner points' sums n, Σx, Σy, Σx², Σxy, Σy², Σs, Σxs (m, m²) and their origin
+        /// (m).
+        pub face: [f64; 14],
+        /// 1 once the face's points make a line, 0 before.
+        pub face_believed: u32,
+        /// Reserved (0).
+        pub reserved: u32,
     }
 }
 
 use crate::insertion::drive::ArmDriveState;
+use crate::insertion::face::FaceState;
+
+fn face_words(f: &FaceState) -> [f64; 14] {
+    let mut w = [0.0; 14];
+    w[0] = f.angle_rad;
+    w[1..4].copy_from_slice(&f.wrench);
+    w[4..12].copy_from_slice(&f.sums);
+    w[12..14].copy_from_slice(&f.origin);
+    w
+}
+
+fn face_of(w: &[f64; 14], believed: u32) -> FaceState {
+    let mut f = FaceState {
+        angle_rad: w[0],
+        believed: believed != 0,
+        ..FaceState::default()
+    };
+    f.wrench.copy_from_slice(&w[1..4]);
+    f.sums.copy_from_slice(&w[4..12]);
+    f.origin.copy_from_slice(&w[12..14]);
+    f
+}
 use crate::insertion::geometry::Feature;
 
 const FEATURES: [Feature; 4] = [
@@ -362,6 +393,9 @@ impl From<&RigState> for InsertionState {
             estimated_state: state_code(s.estimated),
             arm_driven: u32::from(s.arm != ArmDriveState::default()),
             arm: [a.q, a.v, a.integral, a.q_d, a.v_d, a.pose_d, a.rate_d],
+            face: face_words(&c.face),
+            face_believed: u32::from(c.face.believed),
+            reserved: 0,
         }
     }
 }
@@ -389,6 +423,7 @@ impl From<&InsertionState> for RigState {
                 phase_t: m.phase_t_s,
                 aligned_s: m.aligned_s,
                 lost_s: m.lost_s,
+                face: face_of(&m.face, m.face_believed),
             },
             filtered: ([m.filtered[0], m.filtered[1]], m.filtered[2]),
             estimated: state_of(m.estimated_state),
@@ -411,7 +446,7 @@ impl From<&InsertionState> for RigState {
 mod tests {
     use super::*;
     use crate::insertion::drive::Drive;
-    use crate::insertion::rig::{InsertionOptions, InsertionRig};
+    use crate::insertion::rig::{InsertionOptions, InsertionRig, PartFrame};
 
     /// Every code goes there and back; a rig's state mid-insertion survives the wire bit for
     /// bit.
@@ -435,13 +470,20 @@ mod tests {
             }
         }
         assert_eq!(touching_of(touching_code(None)), None);
-        for drive in [Drive::Ideal, Drive::Arm] {
+        for (drive, part_frame) in [
+            (Drive::Ideal, PartFrame::Known),
+            (Drive::Arm, PartFrame::Known),
+            (Drive::Ideal, PartFrame::Unknown),
+        ] {
             let o = InsertionOptions {
                 drive,
+                part_frame,
                 ..InsertionOptions::default()
             };
-            let mut rig = InsertionRig::new(&o, 5).unwrap();
-            while rig.truth().contacts < 2 {
+            // Seed 10 walks far enough on the face for the face's line to be believed.
+            let mut rig = InsertionRig::new(&o, 10).unwrap();
+            let unknown = part_frame == PartFrame::Unknown;
+            while rig.truth().contacts < 2 || unknown && !rig.state().controller.face.believed {
                 let w = rig.sensor_wrench();
                 rig.step(Some(w), 1e-4);
                 assert!(rig.time_s() < 10.0);

@@ -1,0 +1,115 @@
+//! The insertion controller's unit tests.
+
+use super::*;
+
+const WRIST: [f64; 3] = [2e3, 2e3, 5.0];
+
+fn at(force: [f64; 2], moment_nm: f64, tip: [f64; 3]) -> Input {
+    Input {
+        force,
+        moment_nm,
+        tip,
+    }
+}
+
+fn started(method: Method) -> Controller {
+    let mut c = Controller::new(
+        ControllerParams::default(),
+        method,
+        WRIST,
+        [0.0, 1e-3, 0.0],
+        0.5e-3,
+    );
+    // Contact: the approach ends where the peg is, without the wrist's lead.
+    let (target, _) = c.step(&at([0.0, 0.6], 0.0, [0.0, -1e-5, 0.0]), 1e-4);
+    assert_eq!(c.phase(), Phase::Find);
+    assert!((target[1] + 1e-5).abs() < 1e-6, "{target:?}");
+    c
+}
+
+#[test]
+fn methods_parse_by_name() {
+    for m in Method::ALL {
+        assert_eq!(Method::parse(m.name()), Some(m));
+    }
+    assert_eq!(Method::parse("spiral"), None);
+}
+
+/// Pressed on the part with the centre of pressure 3 mm to the right of the tip, the peg
+/// walks left (towards the unsupported side), at the walk speed; 3 mm to the left, right.
+#[test]
+fn the_walk_goes_away_from_the_support() {
+    for (x_c, sign) in [(3e-3, -1.0), (-3e-3, 1.0)] {
+        let mut c = started(Method::NoDither);
+        let f = 2.0;
+        let before = c.target;
+        c.step(&at([0.0, f], x_c * f, [0.0, -1e-5, 0.0]), 1e-3);
+        let moved = c.target[0] - before[0];
+        let want = sign * ControllerParams::default().walk_m_per_s * 1e-3;
+        assert!((moved - want).abs() < 1e-12, "{x_c}: {moved} vs {want}");
+    }
+}
+
+/// Pressed on the face tilted 1° (the part's frame known), the peg is turned square to the
+/// face at the tilt loop's rate, capped at the largest tilt rate; square, it is left alone.
+#[test]
+fn finding_the_hole_squares_the_peg_to_the_face() {
+    let p = ControllerParams::default();
+    for (tilt, want) in [
+        (1f64.to_radians(), -p.max_tilt_rate_rad_per_s),
+        (
+            0.1f64.to_radians(),
+            -std::f64::consts::TAU * p.tilt_bandwidth_hz * 0.1f64.to_radians(),
+        ),
+        (0.0, 0.0),
+    ] {
+        let mut c = started(Method::NoDither);
+        let before = c.target[2];
+        c.step(&at([0.0, 1.0], 0.0, [0.0, -1e-5, tilt]), 1e-3);
+        let turned = (c.target[2] - before) / 1e-3;
+        assert!((turned - want).abs() < 1e-12, "{tilt}: {turned} vs {want}");
+    }
+}
+
+/// Contact lost for longer than `contact_lost_s`: the lead comes off once (the commanded
+/// pose jumps to the peg), then the commanded pose goes down at the approach speed.
+#[test]
+fn a_lost_contact_takes_the_lead_off_once() {
+    let mut c = started(Method::Dither);
+    let p = ControllerParams::default();
+    c.target = [1e-3, -2e-3, 0.0];
+    let tip = [0.0, -0.4e-3, 0.0];
+    let dt = 1e-4;
+    let ticks = (p.contact_lost_s / dt).round() as usize;
+    for _ in 0..ticks - 1 {
+        c.step(&at([0.0, 0.0], 0.0, tip), dt);
+    }
+    assert!(c.target[1] < -1e-3, "not yet: {:?}", c.target);
+    c.step(&at([0.0, 0.0], 0.0, tip), dt);
+    assert!((c.target[0] - tip[0]).abs() < 1e-12);
+    assert!(
+        (c.target[1] - (tip[1] - p.approach_m_per_s * dt)).abs() < 1e-12,
+        "{:?}",
+        c.target
+    );
+    c.step(&at([0.0, 0.0], 0.0, tip), dt);
+    assert!((c.target[1] - (tip[1] - 2.0 * p.approach_m_per_s * dt)).abs() < 1e-12);
+}
+
+/// Past the chamfer the peg is in the hole: the dither method aligns before it inserts,
+/// the search goes straight in.
+#[test]
+fn in_the_hole_dither_aligns_and_search_inserts() {
+    let deep = [0.0, -1.2e-3, 0.0];
+    let mut c = started(Method::Dither);
+    c.step(&at([0.0, 2.0], 0.0, deep), 1e-4);
+    assert_eq!(c.phase(), Phase::Align);
+    // Aligned: a moment below a tenth of r F_y for 0.1 s.
+    for _ in 0..1001 {
+        c.step(&at([0.0, 1.0], 1e-4, deep), 1e-4);
+    }
+    assert_eq!(c.phase(), Phase::Insert);
+    let mut s = started(Method::Search);
+    s.step(&at([0.0, 2.0], 0.0, deep), 1e-4);
+    assert_eq!(s.phase(), Phase::Insert);
+}
