@@ -138,7 +138,11 @@ pub struct ControllerParams {
     /// Bandwidth of the loop that turns the peg square to the face as estimated, while
     /// finding the hole (Hz).
     pub tilt_bandwidth_hz: f64,
-    /// The face's tangent estimate from the find phase's dither.
+    /// The tilt against the face's normal the squaring leaves, its sign the peg's (degrees):
+    /// a square peg walked off a sharp edge drops flat onto the far edge, a tilted one enters
+    /// corner first.
+    pub kept_tilt_deg: f64,
+    /// The face's tangent estimate.
     pub face: FaceParams,
 }
 
@@ -176,6 +180,7 @@ impl Default for ControllerParams {
             search_growth_m_per_s: 1e-3,
             search_max_m: 3e-3,
             tilt_bandwidth_hz: 1.0,
+            kept_tilt_deg: 0.5,
             face: FaceParams::default(),
         }
     }
@@ -421,8 +426,10 @@ impl Controller {
         } else if !search {
             if find {
                 rate[0] = self.find_rate(pin);
-                // Square to the face as estimated: the tilt against the face's normal.
-                rate[2] = -tau * p.tilt_bandwidth_hz * pin.tip[2];
+                // Square to the face as estimated, all but `kept_tilt_deg` of the tilt against
+                // the face's normal: a corner leads into a sharp-edged hole.
+                let kept = p.kept_tilt_deg.to_radians();
+                rate[2] = -tau * p.tilt_bandwidth_hz * (pin.tip[2] - pin.tip[2].clamp(-kept, kept));
             } else {
                 rate[0] = tau * p.lateral_bandwidth_hz / self.wrist[0] * pin.force[0];
                 rate[2] = tau * p.moment_bandwidth_hz / self.wrist[2] * pin.moment_nm;
