@@ -35,6 +35,7 @@ fn passed(checks: &[Check], id: &str, what: &str) {
 /// built-in law's; MuJoCo's differs, docs/mujoco.md.)
 #[test]
 fn tracking_and_suppression_hold_on_both_worlds_at_every_rate() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     for kind in [WorldKind::Builtin, WorldKind::Mujoco] {
         for rate in ROBOT_RATES_HZ {
             let what = format!("{} at {rate} Hz", kind.name());
@@ -57,6 +58,7 @@ fn tracking_and_suppression_hold_on_both_worlds_at_every_rate() {
 /// of MuJoCo's μ (fig. 4.6), whatever the rate.
 #[test]
 fn friction_coefficient_from_trials_on_mujoco() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     for rate in [10_000.0, 500.0] {
         let out = experiments::fig4_6(&options(WorldKind::Mujoco, rate)).unwrap();
         for c in &out.checks {
@@ -69,6 +71,7 @@ fn friction_coefficient_from_trials_on_mujoco() {
 /// dithers estimate, every check passes; an arm model is refused for it (exit 2).
 #[test]
 fn the_box_finds_its_rotation_centre_on_mujoco() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let out = experiments::fig5_9(&options(WorldKind::Mujoco, 10_000.0)).unwrap();
     for c in &out.checks {
         assert!(c.pass, "fig5.9 mujoco: {}", c.line());
@@ -120,6 +123,7 @@ fn user_arm() -> String {
 /// it, and runs the stack's surface tracking on the flat surface against its lockstep.
 #[test]
 fn a_users_arm_tracks_the_sinusoid_and_the_flat_surface() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let dir = std::env::temp_dir().join(format!("afs-user-arm-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let model = dir.join("arm.xml");
@@ -136,7 +140,6 @@ fn a_users_arm_tracks_the_sinusoid_and_the_flat_surface() {
         "{}",
         String::from_utf8_lossy(&out.stdout)
     );
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let p = prefix("mjuser");
     let _clean = CleanPrefix(p.clone());
     let stack = dir.join("stack.toml");

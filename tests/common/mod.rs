@@ -9,7 +9,10 @@ use std::process::{Child, Command, Output, Stdio};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
-/// Stack tests of one binary run one at a time.
+/// Stack tests of one binary run one at a time, and so does a test's CPU-heavy work (an
+/// in-process experiment): on 2 cores it would run beside another test's real-time stack and
+/// load it (a lockstep agreement of a MuJoCo stack missed one figure once in a full run while
+/// `afs experiment fig5.6` ran outside the lock, 2026-12-03).
 pub static SERIAL: Mutex<()> = Mutex::new(());
 
 /// The `afs` binary: cargo's own for the root package's tests; for another member's tests (the
@@ -216,15 +219,16 @@ pub fn kill_board_and_wait_restart(prefix: &str, name: &str) {
 }
 
 /// Waits for `afs run` (started by [`start_run`]) to end and returns its report, failing with
-/// its stderr and failed checks unless it exited 0.
+/// its stderr, failed checks and the lockstep agreement's figures unless it exited 0.
 pub fn finish_passed(child: Child, what: &str) -> RunReport {
     let out = finish(child, what);
     let r = run_report(&out);
     assert!(
         out.status.success(),
-        "{}\n{}",
+        "{}\n{}\n{:#?}",
         String::from_utf8_lossy(&out.stderr),
-        failed(&r)
+        failed(&r),
+        r.agreement
     );
     r
 }
