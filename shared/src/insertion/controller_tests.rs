@@ -50,24 +50,34 @@ fn the_walk_goes_away_from_the_support() {
     }
 }
 
-/// Pressed on the face tilted 1° (the part's frame known), the peg is turned square to the
-/// face at the tilt loop's rate, capped at the largest tilt rate; square, it is left alone.
+/// Pressed on the face tilted 1° either way (the part's frame known), the peg is turned square
+/// to the face at the tilt loop's rate, capped at the largest tilt rate, all but the kept
+/// 0.5° of the tilt; within the kept tilt, or square, it is left alone.
 #[test]
 fn finding_the_hole_squares_the_peg_to_the_face() {
     let p = ControllerParams::default();
-    for (tilt, want) in [
-        (1f64.to_radians(), -p.max_tilt_rate_rad_per_s),
+    let kept = p.kept_tilt_deg;
+    for (tilt_deg, want) in [
+        (1.0f64, -p.max_tilt_rate_rad_per_s),
+        (-1.0, p.max_tilt_rate_rad_per_s),
         (
-            0.1f64.to_radians(),
+            kept + 0.1,
             -std::f64::consts::TAU * p.tilt_bandwidth_hz * 0.1f64.to_radians(),
         ),
+        (0.8 * kept, 0.0),
         (0.0, 0.0),
     ] {
         let mut c = started(Method::NoDither);
         let before = c.target[2];
-        c.step(&at([0.0, 1.0], 0.0, [0.0, -1e-5, tilt]), 1e-3);
+        c.step(
+            &at([0.0, 1.0], 0.0, [0.0, -1e-5, tilt_deg.to_radians()]),
+            1e-3,
+        );
         let turned = (c.target[2] - before) / 1e-3;
-        assert!((turned - want).abs() < 1e-12, "{tilt}: {turned} vs {want}");
+        assert!(
+            (turned - want).abs() < 1e-12,
+            "{tilt_deg}°: {turned} vs {want}"
+        );
     }
 }
 
