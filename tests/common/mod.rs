@@ -219,16 +219,23 @@ pub fn kill_board_and_wait_restart(prefix: &str, name: &str) {
 }
 
 /// Waits for `afs run` (started by [`start_run`]) to end and returns its report, failing with
-/// its stderr, failed checks and the lockstep agreement's figures unless it exited 0.
+/// its stderr, failed checks, the lockstep agreement's figures and both sides' tracking figures
+/// (ticks, safe ticks, distance travelled, estimates) unless it exited 0.
 pub fn finish_passed(child: Child, what: &str) -> RunReport {
     let out = finish(child, what);
     let r = run_report(&out);
     assert!(
         out.status.success(),
-        "{}\n{}\n{:#?}",
+        "{}\n{}\n{:#?}\nstack: ticks {}, safe {}, {:?}\nreference: ticks {}, safe {}, {:?}",
         String::from_utf8_lossy(&out.stderr),
         failed(&r),
-        r.agreement
+        r.agreement,
+        r.stack.ticks,
+        r.stack.safe_ticks,
+        r.stack.tracking,
+        r.reference.ticks,
+        r.reference.safe_ticks,
+        r.reference.tracking
     );
     r
 }
