@@ -30,6 +30,13 @@ pub fn perp(v: Vec2) -> Vec2 {
     Vec2::new(-v.y, v.x)
 }
 
+/// `v` turned by `angle` (rad, counter-clockwise): a vector of a frame turned by `angle` in the
+/// frame it was turned from.
+pub fn turn(v: [f64; 2], angle: f64) -> [f64; 2] {
+    let (s, c) = angle.sin_cos();
+    [c * v[0] - s * v[1], s * v[0] + c * v[1]]
+}
+
 /// Planar cross product `a × b` (z component).
 pub fn cross(a: Vec2, b: Vec2) -> f64 {
     a.x * b.y - a.y * b.x
@@ -232,6 +239,21 @@ pub fn correlation(pairs: &[[f64; 2]]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `turn` is nalgebra's rotation, and turning back undoes it.
+    #[test]
+    fn turn_is_the_rotation() {
+        for (v, a) in [([1.0, 0.0], 0.3), ([0.2, -1.5], -2.0), ([3.0, 4.0], 1e-3)] {
+            let r = nalgebra::Rotation2::new(a) * Vec2::new(v[0], v[1]);
+            let t = turn(v, a);
+            assert!(
+                (t[0] - r.x).abs() < 1e-14 && (t[1] - r.y).abs() < 1e-14,
+                "{v:?} {a}"
+            );
+            let back = turn(t, -a);
+            assert!((back[0] - v[0]).abs() < 1e-14 && (back[1] - v[1]).abs() < 1e-14);
+        }
+    }
 
     /// Gauss–Legendre with N points integrates x^(2N−1) exactly.
     #[test]

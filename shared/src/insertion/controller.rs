@@ -14,6 +14,7 @@
 //!   no estimation.
 
 use super::face::{FaceParams, FaceProbe, FaceState};
+use crate::math::turn;
 use serde::{Deserialize, Serialize};
 
 /// Which controller.
@@ -239,8 +240,8 @@ pub struct Controller {
     aligned_s: f64,
     /// How long the contact force has been below `contact_lost_n` (s).
     lost_s: f64,
-    /// The face's tangent, the robot's belief (its frame's x axis) until the find phase's
-    /// dither has measured it.
+    /// The face's tangent, the robot's belief (its frame's x axis) until the line the peg's
+    /// corner slides along on the face has given it (with the part's frame unknown).
     face: FaceProbe,
 }
 
@@ -538,12 +539,6 @@ impl Controller {
         self.phase = phase;
         self.phase_t = 0.0;
     }
-}
-
-/// `v` turned by `angle` (rad, counter-clockwise).
-fn turn(v: [f64; 2], angle: f64) -> [f64; 2] {
-    let (s, c) = angle.sin_cos();
-    [c * v[0] - s * v[1], s * v[0] + c * v[1]]
 }
 
 #[cfg(test)]

@@ -10,6 +10,7 @@ use super::estimate::Estimator;
 use super::plant::{ContactState, PegParams, PegPlant, PegPlantState, PegTruth};
 use super::whitney::Fit;
 use crate::error::ConfigError;
+use crate::math::turn;
 use crate::sensor::Wrench;
 use rand_chacha::ChaCha8Rng;
 use rand_chacha::rand_core::SeedableRng;
@@ -221,14 +222,12 @@ struct RobotFrame {
 impl RobotFrame {
     /// A vector of the part's frame in the robot's.
     fn vector_in(self, v: [f64; 2]) -> [f64; 2] {
-        let (s, c) = (-self.angle_rad).sin_cos();
-        [c * v[0] - s * v[1], s * v[0] + c * v[1]]
+        turn(v, -self.angle_rad)
     }
 
     /// A vector of the robot's frame in the part's.
     fn vector_out(self, v: [f64; 2]) -> [f64; 2] {
-        let (s, c) = self.angle_rad.sin_cos();
-        [c * v[0] - s * v[1], s * v[0] + c * v[1]]
+        turn(v, self.angle_rad)
     }
 
     /// A pose (or a pose's rate) of the part's frame in the robot's.
