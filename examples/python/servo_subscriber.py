@@ -1,7 +1,7 @@
 """Subscribes to a running afs stack's controller stream (the servo's state) from Python.
 
-The payload is decoded with the byte layout of docs/messages.md (``ServoSample`` version 2,
-216 bytes).
+The payload is decoded with the byte layout of docs/messages.md (``ServoSample`` version 3,
+232 bytes).
 The stream crosses the link board (docs/link.md), so this works the same on the controller's
 host and on a remote host that its link board reaches.
 
@@ -22,7 +22,7 @@ from afs_client import subscribe
 
 
 class ServoSample(ctypes.Structure):
-    """``afs::ServoSample.v2``: the controller's state of one servo tick (docs/messages.md)."""
+    """``afs::ServoSample.v3``: the controller's state of one servo tick (docs/messages.md)."""
 
     _fields_ = [
         ("version", ctypes.c_uint32),
@@ -55,18 +55,21 @@ class ServoSample(ctypes.Structure):
         ("aborted", ctypes.c_uint32),
         ("safe_entries", ctypes.c_uint32),
         ("estimations_requested", ctypes.c_uint32),
-        ("reserved", ctypes.c_uint32),
+        ("force_triggers", ctypes.c_uint32),
+        ("slope_triggers", ctypes.c_uint32),
+        ("contact_losses", ctypes.c_uint32),
+        ("reserved", ctypes.c_uint32 * 2),
     ]
 
     @staticmethod
     def type_name() -> str:
         """The iceoryx2 type name the Rust side registers."""
-        return "afs::ServoSample.v2"
+        return "afs::ServoSample.v3"
 
 
-assert ctypes.sizeof(ServoSample) == 216, "layout differs from docs/messages.md"
+assert ctypes.sizeof(ServoSample) == 232, "layout differs from docs/messages.md"
 
-LAYOUT_VERSION = 2
+LAYOUT_VERSION = 3
 
 
 def main() -> int:

@@ -870,7 +870,7 @@ mod scenario_tests {
 
     /// The surface-tracking scenario run through the lockstep gives the same figures, bit for
     /// bit, as the `fig5.6` experiment's code over the same 3 s started the scenario's way (one
-    /// monitor measures both).
+    /// monitor measures both, the one from the servo's samples).
     #[test]
     fn lockstep_reference_matches_the_experiment_code() {
         let base = SimConfig::default();
@@ -890,6 +890,9 @@ mod scenario_tests {
         assert_eq!(r.tracking.worst_normal_deviation, e.worst_normal_deviation);
         assert_eq!(r.tracking.travelled_m, e.travelled_m);
         assert_eq!(r.tracking.ticks_without_contact, 0);
+        // Every counter crosses the servo's samples, the triggers too.
+        assert_eq!(r.tracking.estimations, e.estimations);
+        assert_eq!(e.estimations.slope_triggers, 1, "{:?}", e.estimations);
         let c = crate::scenario::compare(&r, &r);
         assert!(c.agrees);
     }

@@ -10,12 +10,12 @@ use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 pub const SERVO_BATCH: usize = 200;
 
 wire_message! {
-    version = 2;
+    version = 3;
     /// Consecutive [`ServoSample`]s of one servo, as the link board of the controller's host packs
     /// them (`afs/link/servo`); the link board of the remote host unpacks them onto its own
     /// `afs/servo/state`.
     #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-    #[type_name("afs::ServoBatch.v2")]
+    #[type_name("afs::ServoBatch.v3")]
     pub struct ServoBatch {
         /// The layout version, `Self::VERSION` (docs/messages.md).
         pub version: u32,

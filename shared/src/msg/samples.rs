@@ -172,10 +172,10 @@ wire_flags! {
 }
 
 wire_message! {
-    version = 2;
+    version = 3;
     /// The controller's state, every servo tick.
     #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
-    #[type_name("afs::ServoSample.v2")]
+    #[type_name("afs::ServoSample.v3")]
     pub struct ServoSample {
         /// The layout version, `Self::VERSION` (docs/messages.md).
         pub version: u32,
@@ -237,8 +237,14 @@ wire_message! {
         pub safe_entries: u32,
         /// Estimations started because they were asked for ([`ServoCommand`]).
         pub estimations_requested: u32,
-        /// Reserved (0).
-        pub reserved: u32,
+        /// Estimations started by the normal force leaving its band.
+        pub force_triggers: u32,
+        /// Estimations started by the normal set-point drifting against the travel.
+        pub slope_triggers: u32,
+        /// Probe runs the contact guard abandoned.
+        pub contact_losses: u32,
+        /// Reserved (0; no padding left to the compiler).
+        pub reserved: [u32; 2],
     }
 }
 
@@ -285,6 +291,9 @@ impl ServoSample {
         self.aborted = c.aborted;
         self.safe_entries = c.safe_entries;
         self.estimations_requested = c.requested;
+        self.force_triggers = c.force_triggers;
+        self.slope_triggers = c.slope_triggers;
+        self.contact_losses = c.contact_losses;
     }
 }
 

@@ -164,7 +164,9 @@ impl ScenarioMonitor {
             failures: s.failures,
             aborted: s.aborted,
             safe_entries: s.safe_entries,
-            ..self.counters
+            force_triggers: s.force_triggers,
+            slope_triggers: s.slope_triggers,
+            contact_losses: s.contact_losses,
         };
         if s.flags.contains(ServoFlags::SAFE) {
             self.safe_ticks += 1;
