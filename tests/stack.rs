@@ -413,7 +413,7 @@ fn an_old_client_is_refused_and_one_attached_at_the_end_is_an_observer() {
     let err = String::from_utf8_lossy(&old.stderr);
     assert_eq!(old.status.code(), Some(2), "{err}");
     for needle in [
-        "afs::ServoSample.v2 (layout version 2, 216 bytes)",
+        "afs::ServoSample.v3 (layout version 3, 232 bytes)",
         "afs::ServoSample (layout version 1, 208 bytes)",
     ] {
         assert!(err.contains(needle), "{err}");

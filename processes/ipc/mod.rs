@@ -478,7 +478,7 @@ mod tests {
             .expect_err("refused")
             .to_string();
         for needle in [
-            "afs::ServoSample.v2 (layout version 2, 216 bytes)",
+            "afs::ServoSample.v3 (layout version 3, 232 bytes)",
             "afs::ServoSample (layout version 1, 208 bytes)",
         ] {
             assert!(e.contains(needle), "{e}");

@@ -35,7 +35,7 @@ pub enum Rec {
 /// The topics, in channel order: (topic, message type name).
 pub const TOPICS: [(&str, &str); 9] = [
     ("/plant", "afs::PlantSample"),
-    ("/servo", "afs::ServoSample.v2"),
+    ("/servo", "afs::ServoSample.v3"),
     ("/wrench", "afs::WrenchSample"),
     ("/loop_stats", "afs::LoopStats.v2"),
     ("/friction", "afs::FrictionReport"),
