@@ -78,8 +78,13 @@ pub struct ControllerParams {
     pub contact_lost_n: f64,
     /// How long the force must stay below `contact_lost_n` (s).
     pub contact_lost_s: f64,
-    /// A lead of the commanded pose on the peg taken off when the contact is lost (m).
+    /// A lead of the commanded pose on the peg longer than this is cut when the contact is
+    /// lost while finding the hole (m): across the axis to nothing, along it back to
+    /// `lead_kept_m`.
     pub lead_snap_m: f64,
+    /// The lead along the axis kept when the contact is lost (m): a peg that dropped into the
+    /// hole stays pressed into it.
+    pub lead_kept_m: f64,
     /// Force along the axis while finding the hole (N): light, so friction does not hold the
     /// walk.
     pub find_force_n: f64,
@@ -155,6 +160,7 @@ impl Default for ControllerParams {
             contact_lost_n: 0.2,
             contact_lost_s: 0.5e-3,
             lead_snap_m: 0.2e-3,
+            lead_kept_m: 0.15e-3,
             find_force_n: 1.0,
             centred_m: 0.3e-3,
             align_force_n: 1.0,
@@ -409,17 +415,20 @@ impl Controller {
         }
         if lost {
             // Guarded descent, while finding the hole: the wrist's lead on a peg that
-            // dropped off an edge would fling it into the next contact; take the lead
-            // off once, where the loss is found, and go on down at the approach speed.
-            // In the hole the peg is free between the walls most of the time, and the
-            // insertion force's lead is what pushes it on.
+            // dropped off an edge would fling it into the next contact. Once, where the loss
+            // is found, take the lead across the axis off and cut the lead along it back to
+            // `lead_kept_m`, then go on down at the approach speed. Not all of the press:
+            // on an arm, taking it back lifts the flange fast enough to pull a peg that
+            // dropped into the hole back out onto the edge. In the hole the peg is free
+            // between the walls most of the time, and the insertion force's lead is what
+            // pushes it on.
             if self.lost_s - dt < p.contact_lost_s {
-                // Only a lead worth the name: a peg hovering at the hole's mouth
-                // loses and finds contact every dither period, and a snap each time
-                // would undo the descent.
-                for k in 0..2 {
-                    if (self.target[k] - inp.tip[k]).abs() > p.lead_snap_m {
-                        self.target[k] = inp.tip[k];
+                for (k, kept) in [(0, 0.0), (1, p.lead_kept_m)] {
+                    let lead = self.target[k] - inp.tip[k];
+                    // Only a lead worth the name: a peg hovering at the hole's mouth loses
+                    // and finds contact every dither period.
+                    if lead.abs() > p.lead_snap_m {
+                        self.target[k] = inp.tip[k] + lead.clamp(-kept, kept);
                     }
                 }
             }

@@ -81,10 +81,11 @@ fn finding_the_hole_squares_the_peg_to_the_face() {
     }
 }
 
-/// Contact lost for longer than `contact_lost_s`: the lead comes off once (the commanded
-/// pose jumps to the peg), then the commanded pose goes down at the approach speed.
+/// Contact lost for longer than `contact_lost_s`: once, the lead across the axis comes off
+/// (the commanded pose jumps to the peg) and the lead along it is cut back to `lead_kept_m`,
+/// then the commanded pose goes down at the approach speed.
 #[test]
-fn a_lost_contact_takes_the_lead_off_once() {
+fn a_lost_contact_cuts_the_lead_back_once() {
     let mut c = started(Method::Dither);
     let p = ControllerParams::default();
     c.target = [1e-3, -2e-3, 0.0];
@@ -98,12 +99,13 @@ fn a_lost_contact_takes_the_lead_off_once() {
     c.step(&at([0.0, 0.0], 0.0, tip), dt);
     assert!((c.target[0] - tip[0]).abs() < 1e-12);
     assert!(
-        (c.target[1] - (tip[1] - p.approach_m_per_s * dt)).abs() < 1e-12,
+        (c.target[1] - (tip[1] - p.lead_kept_m - p.approach_m_per_s * dt)).abs() < 1e-12,
         "{:?}",
         c.target
     );
     c.step(&at([0.0, 0.0], 0.0, tip), dt);
-    assert!((c.target[1] - (tip[1] - 2.0 * p.approach_m_per_s * dt)).abs() < 1e-12);
+    let want = tip[1] - p.lead_kept_m - 2.0 * p.approach_m_per_s * dt;
+    assert!((c.target[1] - want).abs() < 1e-12);
 }
 
 /// Past the chamfer the peg is in the hole: the dither method aligns before it inserts,
