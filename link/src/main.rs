@@ -121,6 +121,9 @@ struct Summary {
     bridged: bool,
 }
 
+/// The keys the tunnel's frames cross on (iceoryx2's zenoh carrier, version 0.10).
+const TUNNEL_KEYS: &str = "iox2/v1/channel/**";
+
 fn zenoh_config(cli: &Cli) -> Result<zenoh::Config> {
     if let Some(p) = &cli.zenoh_config {
         return zenoh::Config::from_file(p)
@@ -138,12 +141,17 @@ fn zenoh_config(cli: &Cli) -> Result<zenoh::Config> {
             .join(", ")
     };
     // Peers on the given endpoints only: no multicast or gossip scouting, so nothing is sent
-    // anywhere but to the addresses named.
+    // anywhere but to the addresses named. The tunnel's frames block when zenoh's send queue
+    // is full instead of being dropped after 1 ms (zenoh's default for a put): on a loaded
+    // machine a batch went missing that way (docs/link.md); the board waiting a moment is
+    // what the servo stream's 1.3-s buffer is for.
     let text = format!(
         r#"{{ mode: "peer",
              listen: {{ endpoints: [{}] }},
              connect: {{ endpoints: [{}] }},
-             scouting: {{ multicast: {{ enabled: false }}, gossip: {{ enabled: false }} }} }}"#,
+             scouting: {{ multicast: {{ enabled: false }}, gossip: {{ enabled: false }} }},
+             qos: {{ publication: [{{ key_exprs: ["{TUNNEL_KEYS}"],
+                                      config: {{ congestion_control: "block" }} }}] }} }}"#,
         list(&cli.listen),
         list(&cli.connect)
     );
