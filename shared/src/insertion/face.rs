@@ -241,6 +241,18 @@ mod tests {
 
     const WIDTH: f64 = 0.01;
 
+    /// A probe estimating, the robot's belief 0.
+    fn probe() -> FaceProbe {
+        FaceProbe::new(
+            FaceParams {
+                estimate: true,
+                ..FaceParams::default()
+            },
+            WIDTH,
+            0.0,
+        )
+    }
+
     /// Feeds the estimate a peg tilted by `tilt` against a face at `face_angle` (robot frame)
     /// while its tip moves 1 mm: the part touches the tip face at `contact(u)` (on the face, m,
     /// u the distance moved), at `s(u)` from the tip along the tip face, with 1 N along the
@@ -253,14 +265,7 @@ mod tests {
         s: impl Fn(f64) -> f64,
         friction: f64,
     ) -> FaceProbe {
-        let mut f = FaceProbe::new(
-            FaceParams {
-                estimate: true,
-                ..FaceParams::default()
-            },
-            WIDTH,
-            0.0,
-        );
+        let mut f = probe();
         let (t, n) = (
             [face_angle.cos(), face_angle.sin()],
             [-face_angle.sin(), face_angle.cos()],
@@ -313,14 +318,7 @@ mod tests {
     #[test]
     fn a_line_along_the_peg_is_not_the_face() {
         let (alpha, tilt) = (0.5f64.to_radians(), -1f64.to_radians());
-        let mut f = FaceProbe::new(
-            FaceParams {
-                estimate: true,
-                ..FaceParams::default()
-            },
-            WIDTH,
-            0.0,
-        );
+        let mut f = probe();
         let theta = alpha + tilt;
         let (e, n) = ([theta.cos(), theta.sin()], [-alpha.sin(), alpha.cos()]);
         let s = 0.5 * WIDTH - 0.4e-3;
