@@ -216,9 +216,8 @@ impl FaceProbe {
         // The other corner is above the line only if the tip face turns down towards the
         // touching one: side · (angle − tilt) > 0. The hole's edge under the tip face near
         // its end, which the slope test can miss over a short walk (the centre of pressure's
-        // noise is 0.2 mm), traces a line along the peg (seed 406 of the default sweep: the
-        // line 0.03° from the tip face, 2.07° from the face). Not a reason to start again: the
-        // line may yet grow into the face's.
+        // noise), traces a line along the peg (seed 406 of the default sweep, 2.08° from the
+        // face). Not a reason to start again: the line may yet grow into the face's.
         if side * (angle - tilt_rad) < p.least_tilt_deg.to_radians() {
             return;
         }
