@@ -51,6 +51,9 @@ pub struct InsertionRun {
     pub state_classification_accuracy: f64,
     /// Ticks counted.
     pub classified_ticks: usize,
+    /// The counted ticks estimated wrong, by true and estimated class, most first.
+    #[serde(default)]
+    pub wrong_states: Vec<WrongStates>,
     /// Time each phase began (s): find, align, insert, done.
     pub phase_starts_s: [Option<f64>; 4],
     /// Samples of the applied wrench while the wrist pressed the peg in the hole with at least
@@ -66,6 +69,17 @@ pub struct InsertionRun {
     /// Time of the last tick seen (s): where a run shorter than the time limit was cut.
     #[serde(default)]
     pub duration_s: f64,
+}
+
+/// Counted ticks of one true class estimated as another.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct WrongStates {
+    /// The true class.
+    pub truth: ContactState,
+    /// The estimated class.
+    pub estimated: ContactState,
+    /// How many ticks.
+    pub ticks: usize,
 }
 
 /// Turns an insertion's ticks into an [`InsertionRun`].
@@ -196,7 +210,8 @@ impl InsertionMonitor {
             (true, Some(a), Some(b)) => Some(b - a),
             _ => None,
         };
-        let (right, counted) = classification(&self.states, &self.changes, TRANSITION_S);
+        let (wrong, counted) = classification(&self.states, &self.changes, TRANSITION_S);
+        let right = counted - wrong.iter().map(|w| w.ticks).sum::<usize>();
         InsertionRun {
             inserted,
             insertion_time_s: time,
@@ -206,6 +221,7 @@ impl InsertionMonitor {
             wedged_ticks: self.wedged,
             state_classification_accuracy: right as f64 / counted.max(1) as f64,
             classified_ticks: counted,
+            wrong_states: wrong,
             phase_starts_s: self.starts,
             jamming_diagram_samples: self.whitney.len(),
             inside_parallelogram: (!self.whitney.is_empty())
@@ -217,15 +233,16 @@ impl InsertionMonitor {
     }
 }
 
-/// How many of `states` (time, true class, estimated class) were right, and how many were
-/// counted: those farther than `window` from every time in `changes`.
+/// The ticks of `states` (time, true class, estimated class) counted, those farther than
+/// `window` from every time in `changes`: the wrong ones by true and estimated class (most
+/// first), and how many.
 fn classification(
     states: &[(f64, ContactState, ContactState)],
     changes: &[f64],
     window: f64,
-) -> (usize, usize) {
-    let (mut right, mut counted, mut k) = (0, 0, 0);
-    for &(t, truth, est) in states {
+) -> (Vec<WrongStates>, usize) {
+    let (mut wrong, mut counted, mut k) = (Vec::<WrongStates>::new(), 0, 0);
+    for &(t, truth, estimated) in states {
         while k + 1 < changes.len() && changes[k + 1] <= t {
             k += 1;
         }
@@ -234,7 +251,62 @@ fn classification(
             continue;
         }
         counted += 1;
-        right += usize::from(truth == est);
+        if truth == estimated {
+            continue;
+        }
+        match wrong
+            .iter_mut()
+            .find(|w| w.truth == truth && w.estimated == estimated)
+        {
+            Some(w) => w.ticks += 1,
+            None => wrong.push(WrongStates {
+                truth,
+                estimated,
+                ticks: 1,
+            }),
+        }
     }
-    (right, counted)
+    wrong.sort_by_key(|w| std::cmp::Reverse(w.ticks));
+    (wrong, counted)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The wrong ticks are counted by true and estimated class, outside the transitions: on
+    /// the face from the first tick, estimated right for 0.1 s and then as the chamfer.
+    #[test]
+    fn wrong_ticks_are_counted_by_class() {
+        let fit = Fit {
+            peg_width_m: 0.01,
+            clearance_ratio: 0.002,
+            friction: 0.3,
+        };
+        let mut m = InsertionMonitor::new(1e-3, fit, 15.0);
+        for k in 1..=200 {
+            let mut tick = PegTick {
+                t: f64::from(k) * 1e-3,
+                phase: Phase::Find,
+                estimated: ContactState::Face,
+                ..PegTick::default()
+            };
+            tick.truth.state = ContactState::Face;
+            if k > 100 {
+                tick.estimated = ContactState::Chamfer;
+            }
+            m.push(&tick);
+        }
+        let run = m.report();
+        let wrong = WrongStates {
+            truth: ContactState::Face,
+            estimated: ContactState::Chamfer,
+            ticks: 100,
+        };
+        assert_eq!(run.wrong_states, [wrong]);
+        let right = run.classified_ticks - 100;
+        assert!((80..100).contains(&right), "{run:?}");
+        let accuracy = right as f64 / run.classified_ticks as f64;
+        assert!((run.state_classification_accuracy - accuracy).abs() < 1e-12);
+    }
 }

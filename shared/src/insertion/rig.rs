@@ -6,7 +6,7 @@
 
 use super::controller::{Controller, ControllerParams, ControllerState, Input, Method, Phase};
 use super::drive::{ArmDrive, ArmDriveParams, ArmDriveState, Drive};
-use super::estimate::Estimator;
+use super::estimate::{Estimator, EstimatorState};
 use super::plant::{ContactState, PegParams, PegPlant, PegPlantState, PegTruth};
 use super::whitney::Fit;
 use crate::error::ConfigError;
@@ -163,6 +163,11 @@ impl InsertionOptions {
         }
     }
 
+    /// The largest initial angle error (rad): the one set, or 2°.
+    pub fn angle_error_bound_rad(&self) -> f64 {
+        self.angle_deg.map_or(2.0, f64::abs).to_radians()
+    }
+
     /// The initial errors of `seed` (m, rad): uniform ±2 mm, ±2° unless set.
     pub fn initial_errors(&self, seed: u64) -> (f64, f64) {
         let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x1a5e_7100);
@@ -184,8 +189,8 @@ pub struct RigState {
     pub plant: PegPlantState,
     /// The controller.
     pub controller: ControllerState,
-    /// The estimator's filtered force (N) and moment (N·m).
-    pub filtered: ([f64; 2], f64),
+    /// The estimator's.
+    pub estimator: EstimatorState,
     /// The last estimated contact state.
     pub estimated: ContactState,
     /// The tip's height at the last tick (m), for the insertion speed.
@@ -286,7 +291,11 @@ impl InsertionRig {
                 robot.pose_in(start),
                 chamfer_depth,
             ),
-            estimator: Estimator::new(0.0, chamfer_depth, g.peg_width_m, o.mu),
+            estimator: match o.part_frame {
+                PartFrame::Known => Estimator::new(0.0, chamfer_depth, g.peg_width_m, o.mu),
+                PartFrame::Unknown => Estimator::new(0.0, chamfer_depth, g.peg_width_m, o.mu)
+                    .with_face_turned_up_to(o.angle_error_bound_rad()),
+            },
             estimated: ContactState::Free,
             prev_tip_y_m: start[1],
             time_s: 0.0,
@@ -330,7 +339,10 @@ impl InsertionRig {
                 };
                 // The estimator knows what the controller knows: the part's frame as the
                 // face's tangent estimate gives it.
-                self.estimated = self.estimator.update(&self.ctl.to_part(&inp), speed, dt);
+                let part = self.ctl.to_part(&inp);
+                self.estimated = self
+                    .estimator
+                    .update(&part, self.ctl.face_angle(), speed, dt);
                 let (target, rate) = self.ctl.step(&inp, dt);
                 (self.robot.pose_out(target), self.robot.rate_out(rate))
             }
@@ -411,7 +423,7 @@ impl InsertionRig {
             time_s: self.time_s,
             plant: self.plant.state(),
             controller: self.ctl.state(),
-            filtered: self.estimator.filtered(),
+            estimator: self.estimator.state(),
             estimated: self.estimated,
             prev_tip_y_m: self.prev_tip_y_m,
             peak_force_n: self.peak_force_n,
@@ -424,7 +436,7 @@ impl InsertionRig {
         self.time_s = s.time_s;
         self.plant.restore(&s.plant);
         self.ctl.restore(&s.controller);
-        self.estimator.restore(s.filtered);
+        self.estimator.restore(&s.estimator);
         self.estimated = s.estimated;
         self.prev_tip_y_m = s.prev_tip_y_m;
         self.peak_force_n = s.peak_force_n;

@@ -296,6 +296,9 @@ wire_struct! {
         pub lost_s: f64,
         /// The estimator's filtered force (N) and moment (N·m).
         pub filtered: [f64; 3],
+        /// The estimator's bounds on the face's slope in the robot's frame (lowest, highest;
+        /// 0, 0 for a part whose orientation is known).
+        pub face_slopes: [f64; 2],
         /// The tip's height at the last tick (m).
         pub prev_tip_y_m: f64,
         /// The largest contact force so far (N).
@@ -321,6 +324,7 @@ wire_struct! {
 }
 
 use crate::insertion::drive::ArmDriveState;
+use crate::insertion::estimate::EstimatorState;
 use crate::insertion::face::FaceState;
 
 fn face_words(f: &FaceState) -> [f64; 14] {
@@ -387,7 +391,12 @@ impl From<&RigState> for InsertionState {
             phase_t_s: c.phase_t,
             aligned_s: c.aligned_s,
             lost_s: c.lost_s,
-            filtered: [s.filtered.0[0], s.filtered.0[1], s.filtered.1],
+            filtered: [
+                s.estimator.filtered.0[0],
+                s.estimator.filtered.0[1],
+                s.estimator.filtered.1,
+            ],
+            face_slopes: s.estimator.face_slopes,
             prev_tip_y_m: s.prev_tip_y_m,
             peak_force_n: s.peak_force_n,
             estimated_state: state_code(s.estimated),
@@ -425,7 +434,10 @@ impl From<&InsertionState> for RigState {
                 lost_s: m.lost_s,
                 face: face_of(&m.face, m.face_believed),
             },
-            filtered: ([m.filtered[0], m.filtered[1]], m.filtered[2]),
+            estimator: EstimatorState {
+                filtered: ([m.filtered[0], m.filtered[1]], m.filtered[2]),
+                face_slopes: m.face_slopes,
+            },
             estimated: state_of(m.estimated_state),
             prev_tip_y_m: m.prev_tip_y_m,
             peak_force_n: m.peak_force_n,
@@ -491,6 +503,9 @@ mod tests {
             let s = rig.state();
             let m = InsertionState::from(&s);
             assert_eq!(m.arm_driven, u32::from(drive == Drive::Arm), "{drive:?}");
+            // The estimator's face slopes, narrowed from the prior's ±tan 2°, cross too.
+            let [lo, hi] = s.estimator.face_slopes;
+            assert_eq!(unknown, hi - lo > 0.0 && hi - lo < 0.01, "{lo} {hi}");
             assert_eq!(RigState::from(&m), s);
         }
     }

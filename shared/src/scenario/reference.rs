@@ -301,6 +301,7 @@ mod tests {
             wedged_ticks: 0,
             state_classification_accuracy: 0.98,
             classified_ticks: 30_000,
+            wrong_states: Vec::new(),
             phase_starts_s: [Some(0.48), Some(1.2), Some(2.7), Some(3.98)],
             jamming_diagram_samples: 150,
             inside_parallelogram: Some(0.8),
