@@ -249,10 +249,9 @@ fn a_killed_sensor_board_gets_its_device_back() {
         .output()
         .unwrap();
     let r = run_report(&out);
-    // The agreement's figures with the failure. A lockstep disagreement here (seen twice in
-    // CI) was the tracker's slope trigger firing on the two runs' different noise after the
-    // kill during a probe; the reference now starts its estimations where the stack's did
-    // (docs/stack.md, *Agreement with the lockstep*).
+    // The agreement's figures with the failure: a lockstep disagreement here was seen twice
+    // in CI, the tracker's slope trigger firing on the two runs' different noise after the
+    // kill (docs/stack.md, *Agreement with the lockstep*: not replayed).
     assert!(
         out.status.success() && r.passed,
         "{}\n{:#?}\n{}",

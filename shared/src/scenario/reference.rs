@@ -5,7 +5,6 @@ use super::{DriverState, Scenario, ScenarioKind, ScenarioReport, TickRange};
 use crate::error::ScenarioError;
 use crate::insertion::monitor::InsertionRun;
 use crate::msg::{PlantSample, ServoFlags, ServoSample};
-use crate::servo::Trigger;
 use crate::sim::Lockstep;
 use serde::{Deserialize, Serialize};
 
@@ -22,10 +21,8 @@ pub fn run_lockstep(scenario: &Scenario, duration_s: f64) -> Result<ScenarioRepo
 pub struct Replay<'a> {
     /// Ticks whose force data the servo could not use, in order.
     pub force_invalid: &'a [TickRange],
-    /// The estimations the servo started, by tick (in order) and trigger; `None`: the
-    /// reference's servo starts its own. Its own force and slope triggers fire on the sensor's
-    /// noise, which the real-time run does not share: replayed, both stop at the same ticks.
-    pub started: Option<&'a [(u64, Trigger)]>,
+    /// Ticks at which the servo started an estimation it was asked for, in order.
+    pub requested: &'a [u64],
     /// Ticks run first by a restarted servo, in order.
     pub servo_restarts: &'a [u64],
 }
@@ -34,9 +31,8 @@ pub struct Replay<'a> {
 /// from [`ScenarioMonitor::replay`]): the servo's force input is made invalid on the ticks the
 /// stack could not use its force data, so the reference goes through the same safe-state
 /// episodes (a scheduling hiccup of the machine aborts a probe run and shifts every later
-/// event: part of both runs rather than a disagreement), the servo starts its tangent
-/// estimations on the ticks the stack's servo started one (asked for, or on its own triggers,
-/// which in the reference are off), and it is restarted from
+/// event: part of both runs rather than a disagreement), the servo is asked for a tangent
+/// estimate on the ticks the stack's servo started one on request, and it is restarted from
 /// its own state ([`Lockstep::restart_servo`]) before the ticks a restarted servo ran first.
 pub fn run_lockstep_replay(
     scenario: &Scenario,
@@ -68,11 +64,8 @@ pub fn run_lockstep_replay(
         }
         let valid = !invalid.get(next).is_some_and(|r| r.contains(seq));
         sim.set_force_valid(valid);
-        if let Some(started) = replay.started {
-            sim.servo_mut().set_own_triggers(false);
-            if let Ok(k) = started.binary_search_by_key(&seq, |s| s.0) {
-                sim.servo_mut().start_tangent_estimate(started[k].1);
-            }
+        if replay.requested.binary_search(&seq).is_ok() {
+            sim.servo_mut().request_tangent_estimate();
         }
         sim.step();
         let p = PlantSample::of_tick(sim.truth(), seq, 0);
@@ -244,40 +237,6 @@ pub const CLASSIFICATION_TOLERANCE: f64 = 0.04;
 mod tests {
     use super::*;
     use crate::sim::SimConfig;
-
-    /// Replaying the stack's estimation starts: the reference starts exactly those, at their
-    /// ticks and with their triggers, and none of its own (which fire on its own noise).
-    #[test]
-    fn the_reference_starts_the_stacks_estimations_and_no_others() {
-        let base = SimConfig::default();
-        let s = Scenario::new("surface-tracking", &base).unwrap();
-        let own = run_lockstep(&s, 6.0).unwrap().tracking.estimations;
-        assert!(own.slope_triggers + own.force_triggers > 0, "{own:?}");
-        let none = run_lockstep_replay(
-            &s,
-            6.0,
-            &Replay {
-                started: Some(&[]),
-                ..Replay::default()
-            },
-        )
-        .unwrap()
-        .tracking
-        .estimations;
-        assert_eq!(none.started, 0, "{none:?}");
-        let one = run_lockstep_replay(
-            &s,
-            6.0,
-            &Replay {
-                started: Some(&[(20_000, Trigger::Slope)]),
-                ..Replay::default()
-            },
-        )
-        .unwrap()
-        .tracking
-        .estimations;
-        assert_eq!((one.started, one.slope_triggers), (1, 1), "{one:?}");
-    }
 
     /// Replaying force-invalid ticks: the reference goes through the same safe-state episodes
     /// at the same ticks and its monitor sees exactly the replayed ranges; with none it is the

@@ -6,7 +6,7 @@ use super::{ScenarioKind, TUNING_START_S};
 use crate::insertion::monitor::{InsertionMonitor, InsertionRun};
 use crate::monitor::{MonitorTick, TrackingMonitor, TrackingRun};
 use crate::msg::{PegSample, PlantSample, ServoFlags, ServoSample};
-use crate::servo::{EstimationCounters, Trigger};
+use crate::servo::EstimationCounters;
 use crate::ticks::{Tick, WindowSummary, sliding_periods, window};
 use serde::{Deserialize, Serialize};
 
@@ -46,7 +46,7 @@ pub struct ScenarioMonitor {
     counters: EstimationCounters,
     safe_ticks: u64,
     invalid: Vec<TickRange>,
-    started: Vec<(u64, Trigger)>,
+    requested: Vec<u64>,
     restarts: Vec<u64>,
     /// The insertion's monitor (`insertion` only) and the last tick it saw.
     insertion: Option<(InsertionMonitor, u64)>,
@@ -86,7 +86,7 @@ impl ScenarioMonitor {
             counters: EstimationCounters::default(),
             safe_ticks: 0,
             invalid: Vec::new(),
-            started: Vec::new(),
+            requested: Vec::new(),
             restarts: Vec::new(),
             insertion: scenario.insertion.map(|o| {
                 (
@@ -114,9 +114,9 @@ impl ScenarioMonitor {
         &self.invalid
     }
 
-    /// The ticks at which the servo started an estimation, and why.
-    pub fn started(&self) -> &[(u64, Trigger)] {
-        &self.started
+    /// The ticks at which the servo started an estimation it was asked for.
+    pub fn requested(&self) -> &[u64] {
+        &self.requested
     }
 
     /// A restarted servo runs the world on from tick `seq` (the supervisor knows; the samples
@@ -131,7 +131,7 @@ impl ScenarioMonitor {
     pub fn replay(&self) -> Replay<'_> {
         Replay {
             force_invalid: &self.invalid,
-            started: Some(&self.started),
+            requested: &self.requested,
             servo_restarts: &self.restarts,
         }
     }
@@ -153,18 +153,8 @@ impl ScenarioMonitor {
         if self.kind != ScenarioKind::Insertion {
             self.tracking.push(&m);
         }
-        if s.estimations_started > self.counters.started {
-            let c = &self.counters;
-            let why = if s.estimations_requested > c.requested {
-                Trigger::Request
-            } else if s.force_triggers > c.force_triggers {
-                Trigger::Force
-            } else if s.slope_triggers > c.slope_triggers {
-                Trigger::Slope
-            } else {
-                Trigger::Travel
-            };
-            self.started.push((s.seq, why));
+        if s.estimations_requested > self.counters.requested {
+            self.requested.push(s.seq);
         }
         self.counters = EstimationCounters {
             started: s.estimations_started,

@@ -124,9 +124,6 @@ pub struct ServoCore {
     contact_lost_ticks: u32,
     /// The last estimate turned a corner: estimate once more `corner_confirm_m` on.
     confirm_corner: bool,
-    /// Whether the tracker starts estimations on its own triggers (force, slope, travel);
-    /// off, only on request ([`ServoCore::start_tangent_estimate`]).
-    own_triggers: bool,
 }
 
 /// Probe samples are recorded every this many servo ticks (1 kHz at 10 kHz).
@@ -234,7 +231,6 @@ impl ServoCore {
             last_stroke: SetpointOffset::default(),
             contact_lost_ticks: 0,
             confirm_corner: false,
-            own_triggers: true,
         })
     }
 

@@ -119,21 +119,9 @@ wire_struct! {
 impl ServoCore {
     /// Starts a tangent estimation: stop, then probe (thesis §5.3.2). Ignored unless tracking.
     pub fn request_tangent_estimate(&mut self) {
-        self.start_tangent_estimate(Trigger::Request);
-    }
-
-    /// Starts a tangent estimation as `why` would have (ignored unless tracking): a lockstep
-    /// that replays a real-time run starts its estimations where the run's did.
-    pub fn start_tangent_estimate(&mut self, why: Trigger) {
         if self.mode == ServoMode::Track {
-            self.begin_estimation(why);
+            self.begin_estimation(Trigger::Request);
         }
-    }
-
-    /// Whether the tracker starts estimations on its own force, slope and travel triggers
-    /// (default true; not part of the servo's state, a setting of the run).
-    pub fn set_own_triggers(&mut self, on: bool) {
-        self.own_triggers = on;
     }
 
     pub(super) fn begin_estimation(&mut self, why: Trigger) {
@@ -335,11 +323,7 @@ impl ServoCore {
         if deviation < 0.5 * t.force_trigger_fraction {
             self.force_armed = true;
         }
-        if !t.enabled
-            || !self.own_triggers
-            || self.mode != ServoMode::Track
-            || self.hybrid.velocity_target() == 0.0
-        {
+        if !t.enabled || self.mode != ServoMode::Track || self.hybrid.velocity_target() == 0.0 {
             return;
         }
         if self.force_armed
