@@ -367,6 +367,24 @@ fn an_unknown_parts_face_is_not_taken_for_the_chamfer() {
     }
 }
 
+/// The part's orientation unknown and no chamfer, seed 6 (turned 1.08°, 0.67 mm): the peg,
+/// square to the face the robot believes, touches the face with its lower corner already in
+/// the hole; taken for in the bore by its tilt in the robot's frame, it jammed at 1.57 mm and
+/// never inserted. Counting the tilt the robot does not know, it walks on into the hole and
+/// inserts.
+#[test]
+fn an_unknown_part_without_a_chamfer_is_not_entered_on_its_edge() {
+    use afs_shared::insertion::rig::PartFrame;
+    let mut opts = Options {
+        seed: 6,
+        ..Options::default()
+    };
+    opts.insertion.part_frame = PartFrame::Unknown;
+    opts.insertion.chamfer_mm = 0.0;
+    let run = experiments::insertion(&opts).unwrap().summary.run;
+    assert!(run.inserted, "{run:?}");
+}
+
 /// Bad insertion options are refused before anything runs, exit 2, naming the option.
 #[test]
 fn bad_insertion_options_are_refused_by_name() {

@@ -485,10 +485,17 @@ impl Controller {
         turn(v, self.face.angle())
     }
     /// Far enough into the hole to leave the find phase: the search goes by its tip's centre,
-    /// the others by the tip face's higher corner (the peg tilted by θ).
+    /// the others by the tip face's higher corner (the peg tilted by θ, and by the tilt
+    /// against the hole the robot may not know: with the part's orientation unknown and the
+    /// face's line not found, `prior_error_deg`). A peg that straddles the hole's edge, its
+    /// lower corner in the hole and its higher one on the face or just above it, would
+    /// otherwise pass for one in the bore (docs/insertion.md, *The part's frame*).
     fn in_bore(&self, inp: &Input) -> bool {
+        let f = &self.params.face;
         let tilt = if self.method == Method::Search {
             0.0
+        } else if f.estimate && !self.face.believed() {
+            inp.tip[2].sin().abs() + f.prior_error_deg.to_radians().sin().abs()
         } else {
             inp.tip[2].sin().abs()
         };

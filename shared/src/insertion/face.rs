@@ -47,6 +47,10 @@ pub struct FaceParams {
     /// (degrees): a corner resting on the face has the rest of the tip face above the face's
     /// line; the hole's edge under the tip face traces the peg's own direction instead.
     pub least_tilt_deg: f64,
+    /// The most the face may be turned from the robot's belief before its line is believed
+    /// (degrees): the part's orientation's uncertainty (0 for a part whose orientation is
+    /// known). A peg square to the robot's belief is turned as much against the hole.
+    pub prior_error_deg: f64,
 }
 
 impl Default for FaceParams {
@@ -62,6 +66,7 @@ impl Default for FaceParams {
             largest_turn_deg: 5.0,
             largest_slip: 0.3,
             least_tilt_deg: 0.15,
+            prior_error_deg: 0.0,
         }
     }
 }

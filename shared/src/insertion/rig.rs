@@ -145,6 +145,9 @@ impl InsertionOptions {
             ..ControllerParams::default()
         };
         p.face.estimate = self.part_frame == PartFrame::Unknown;
+        if p.face.estimate {
+            p.face.prior_error_deg = self.angle_error_bound_rad().to_degrees();
+        }
         p
     }
 
