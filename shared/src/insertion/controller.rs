@@ -492,12 +492,15 @@ impl Controller {
     /// otherwise pass for one in the bore (docs/insertion.md, *The part's frame*).
     fn in_bore(&self, inp: &Input) -> bool {
         let f = &self.params.face;
+        let unknown = if f.estimate && !self.face.believed() {
+            f.prior_error_deg.to_radians().sin().abs()
+        } else {
+            0.0
+        };
         let tilt = if self.method == Method::Search {
             0.0
-        } else if f.estimate && !self.face.believed() {
-            inp.tip[2].sin().abs() + f.prior_error_deg.to_radians().sin().abs()
         } else {
-            inp.tip[2].sin().abs()
+            inp.tip[2].sin().abs() + unknown
         };
         let upper = self.depth_m(inp.tip[1]) - 0.5 * self.params.peg_width_m * tilt;
         upper > self.in_hole_depth_m

@@ -276,6 +276,7 @@ impl InsertionRig {
             },
         };
         let chamfer_depth = g.chamfer_m / g.chamfer_angle_deg.to_radians().tan().max(1e-9);
+        let ctl_params = o.controller_params();
         let arm = match o.drive {
             Drive::Ideal => None,
             Drive::Arm => Some(ArmDrive::new(
@@ -288,17 +289,15 @@ impl InsertionRig {
             plant: PegPlant::new(params, start),
             arm,
             ctl: Controller::new(
-                o.controller_params(),
+                ctl_params,
                 o.method,
                 params.wrist_stiffness,
                 robot.pose_in(start),
                 chamfer_depth,
             ),
-            estimator: match o.part_frame {
-                PartFrame::Known => Estimator::new(0.0, chamfer_depth, g.peg_width_m, o.mu),
-                PartFrame::Unknown => Estimator::new(0.0, chamfer_depth, g.peg_width_m, o.mu)
-                    .with_face_turned_up_to(o.angle_error_bound_rad()),
-            },
+            // The face's prior is the controller's: 0 with the part's orientation known.
+            estimator: Estimator::new(0.0, chamfer_depth, g.peg_width_m, o.mu)
+                .with_face_turned_up_to(ctl_params.face.prior_error_deg.to_radians()),
             estimated: ContactState::Free,
             prev_tip_y_m: start[1],
             time_s: 0.0,
