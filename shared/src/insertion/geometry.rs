@@ -93,6 +93,10 @@ pub struct Contact {
     pub slot: usize,
     /// For a part corner on the peg's side: the distance from the peg's tip along its axis (m).
     pub along_peg_m: Option<f64>,
+    /// What the contact state counts the contact as: `feature`, but for a part corner on the
+    /// peg's tip the feature the peg rests on (the face at the hole's sharp edge, the chamfer
+    /// at its bottom edge), which is not in the hole (docs/insertion.md, *Contact states*).
+    pub counted_as: Feature,
 }
 
 impl Default for Contact {
@@ -105,6 +109,7 @@ impl Default for Contact {
             feature: (Feature::Face, 0),
             slot: 0,
             along_peg_m: None,
+            counted_as: Feature::Face,
         }
     }
 }
@@ -266,6 +271,7 @@ pub fn contacts(
                 feature,
                 slot,
                 along_peg_m: None,
+                counted_as: feature.0,
             };
             n += 1;
         }
@@ -280,7 +286,8 @@ pub fn contacts(
             continue;
         }
         // The nearest of the peg's sides: left, right (the tip and the top are ends).
-        let (depth, normal) = if r - u.abs() <= w.min(l - w) {
+        let on_side = r - u.abs() <= w.min(l - w);
+        let (depth, normal) = if on_side {
             (r - u.abs(), side * -u.signum())
         } else if w < l - w {
             (w, axis)
@@ -290,10 +297,18 @@ pub fn contacts(
         let side_sign = if v.x < 0.0 { -1 } else { 1 };
         // The chamfer's top edge under the peg is the face's edge (the peg rests on the face);
         // the chamfer's bottom edge, or the hole's edge without one, is the hole's.
-        let feature = if profile.corner_count == 4 && (k == 0 || k == 3) {
+        let top_edge = profile.corner_count == 2 || k == 0 || k == 3;
+        let feature = if profile.corner_count == 4 && top_edge {
             Feature::Face
         } else {
             Feature::Wall
+        };
+        // Under the peg's tip the corner is where the peg rests, above the bore: the face's
+        // edge (the sharp edge, the chamfer's top) or the chamfer's bottom edge.
+        let counted_as = match (on_side, top_edge) {
+            (true, _) => feature,
+            (false, true) => Feature::Face,
+            (false, false) => Feature::Chamfer,
         };
         out[n] = Contact {
             depth_m: depth,
@@ -302,6 +317,7 @@ pub fn contacts(
             feature: (feature, side_sign),
             slot: 4 + k,
             along_peg_m: Some(w),
+            counted_as,
         };
         n += 1;
     }
@@ -389,5 +405,48 @@ mod tests {
         assert!((edge[0].depth_m - 2e-6).abs() < 1e-12);
         assert!((edge[0].normal - Vec2::new(1.0, 0.0)).norm() < 1e-12);
         assert!((edge[0].along_peg_m.unwrap() - 0.005).abs() < 1e-12);
+    }
+
+    /// The hole's sharp edge under the peg's tip is where the peg rests on the face (counted
+    /// as the face), on the peg's side it is in the hole (the wall); the chamfer's bottom edge
+    /// under the tip is the chamfer. The feature the bristle follows stays the corner's.
+    #[test]
+    fn a_part_corner_under_the_tip_is_what_the_peg_rests_on() {
+        let g = PegHoleGeometry {
+            chamfer_m: 0.0,
+            ..PegHoleGeometry::default()
+        };
+        let half = 0.5 * g.hole_width_m();
+        let edge = |g: &PegHoleGeometry, pose: [f64; 3]| {
+            let mut out = [Contact::default(); 4 + MAX_CORNERS];
+            let n = contacts(g, &g.profile(), pose, &mut out);
+            let edge: Vec<_> = out[..n].iter().filter(|c| c.slot >= 4).copied().collect();
+            assert_eq!(edge.len(), 1, "{:?}", &out[..n]);
+            edge[0]
+        };
+        // The tip 2 mm left of the centre, 2 µm below the face: the left edge is under it.
+        let under = edge(&g, [-0.002, -2e-6, 0.0]);
+        assert!((under.normal - Vec2::new(0.0, 1.0)).norm() < 1e-12);
+        assert_eq!(under.feature, (Feature::Wall, -1));
+        assert_eq!(under.counted_as, Feature::Face);
+        // The tip 5 mm in, the left side 2 µm over the edge: in the hole.
+        let beside = edge(&g, [-half + 0.005 - 2e-6, -0.005, 0.0]);
+        assert_eq!(beside.counted_as, Feature::Wall);
+        // A shallow chamfer (85° from the axis: 44 µm deep) and the peg tilted 20° to lie on
+        // its bottom edge, 4 mm in from the peg's left corner, which is above the face.
+        let g = PegHoleGeometry {
+            chamfer_angle_deg: 85.0,
+            ..PegHoleGeometry::default()
+        };
+        let h = g.chamfer_m / g.chamfer_angle_deg.to_radians().tan();
+        let theta = -20f64.to_radians();
+        let (axis, side) = peg_axes(theta);
+        let tip = Vec2::new(-half, -h) + side * 0.004 - axis * 2e-6;
+        let bottom = edge(&g, [tip.x, tip.y, theta]);
+        assert!((bottom.normal - axis).norm() < 1e-12);
+        assert_eq!(
+            (bottom.feature, bottom.counted_as),
+            ((Feature::Wall, -1), Feature::Chamfer)
+        );
     }
 }

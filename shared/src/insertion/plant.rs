@@ -432,11 +432,11 @@ fn classify(
     if found.is_empty() {
         return (ContactState::Free, None);
     }
-    let has = |f: Feature| found.iter().any(|c| c.feature.0 == f);
+    let has = |f: Feature| found.iter().any(|c| c.counted_as == f);
     if has(Feature::Bottom) {
         return (ContactState::Bottom, None);
     }
-    let in_hole = |c: &&Contact| c.feature.0 == Feature::Wall;
+    let in_hole = |c: &&Contact| c.counted_as == Feature::Wall;
     let left = found.iter().filter(in_hole).any(|c| c.feature.1 < 0);
     let right = found.iter().filter(in_hole).any(|c| c.feature.1 > 0);
     if left && right {
