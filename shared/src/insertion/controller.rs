@@ -144,9 +144,13 @@ pub struct ControllerParams {
     /// Bandwidth of the loop that turns the peg square to the face as estimated, while
     /// finding the hole (Hz).
     pub tilt_bandwidth_hz: f64,
-    /// The tilt against the face's normal the squaring leaves, its sign the peg's (degrees):
-    /// a square peg walked off a sharp edge drops flat onto the far edge, a tilted one enters
-    /// corner first.
+    /// The tilt against the face's normal the find phase turns the peg to, its sign the peg's
+    /// (degrees; a peg exactly square goes counter-clockwise): a square peg walked off a
+    /// sharp edge drops flat onto the far edge, a tilted one enters corner first. A peg tilted
+    /// less is tilted up to it, not left as it is: at 0.26–0.42° the trailing corner, lower,
+    /// dropped the peg onto the far edge over the force limit on the arm (docs/insertion.md,
+    /// *The arm*). With the part's orientation unknown and the face's line not found, the
+    /// tilt against the face is not known and a tilt under this one is left as it is.
     pub kept_tilt_deg: f64,
     /// The face's tangent estimate.
     pub face: FaceParams,
@@ -436,10 +440,18 @@ impl Controller {
         } else if !search {
             if find {
                 rate[0] = self.find_rate(pin);
-                // Square to the face as estimated, all but `kept_tilt_deg` of the tilt against
-                // the face's normal: a corner leads into a sharp-edged hole.
+                // Square to the face but for `kept_tilt_deg` of the tilt against the face's
+                // normal, on the side the peg leans: a corner leads into a sharp-edged hole.
+                // Where that tilt is not known (the part's orientation unknown, the face's
+                // line not found) the peg believed square is not turned off square.
                 let kept = p.kept_tilt_deg.to_radians();
-                rate[2] = -tau * p.tilt_bandwidth_hz * (pin.tip[2] - pin.tip[2].clamp(-kept, kept));
+                let tilt = pin.tip[2];
+                let keep = if !p.face.estimate || self.face.believed() {
+                    kept.copysign(tilt)
+                } else {
+                    tilt.clamp(-kept, kept)
+                };
+                rate[2] = -tau * p.tilt_bandwidth_hz * (tilt - keep);
             } else {
                 rate[0] = tau * p.lateral_bandwidth_hz / self.wrist[0] * pin.force[0];
                 rate[2] = tau * p.moment_bandwidth_hz / self.wrist[2] * pin.moment_nm;

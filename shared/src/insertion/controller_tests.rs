@@ -52,7 +52,8 @@ fn the_walk_goes_away_from_the_support() {
 
 /// Pressed on the face tilted 1° either way (the part's frame known), the peg is turned square
 /// to the face at the tilt loop's rate, capped at the largest tilt rate, all but the kept
-/// 0.5° of the tilt; within the kept tilt, or square, it is left alone.
+/// 0.5° of the tilt; within the kept tilt it is turned out to it on the side it leans, and a
+/// square peg counter-clockwise.
 #[test]
 fn finding_the_hole_squares_the_peg_to_the_face() {
     let p = ControllerParams::default();
@@ -64,10 +65,50 @@ fn finding_the_hole_squares_the_peg_to_the_face() {
             kept + 0.1,
             -std::f64::consts::TAU * p.tilt_bandwidth_hz * 0.1f64.to_radians(),
         ),
-        (0.8 * kept, 0.0),
-        (0.0, 0.0),
+        (
+            0.8 * kept,
+            std::f64::consts::TAU * p.tilt_bandwidth_hz * (0.2 * kept).to_radians(),
+        ),
+        (
+            -0.8 * kept,
+            -std::f64::consts::TAU * p.tilt_bandwidth_hz * (0.2 * kept).to_radians(),
+        ),
+        (
+            0.0,
+            (std::f64::consts::TAU * p.tilt_bandwidth_hz * kept.to_radians())
+                .min(p.max_tilt_rate_rad_per_s),
+        ),
     ] {
         let mut c = started(Method::NoDither);
+        let before = c.target[2];
+        c.step(
+            &at([0.0, 1.0], 0.0, [0.0, -1e-5, tilt_deg.to_radians()]),
+            1e-3,
+        );
+        let turned = (c.target[2] - before) / 1e-3;
+        assert!(
+            (turned - want).abs() < 1e-12,
+            "{tilt_deg}°: {turned} vs {want}"
+        );
+    }
+}
+
+/// With the part's orientation unknown and the face's line not yet found, a peg within the
+/// kept tilt of the face it believes is left as it is (its tilt against the true face is not
+/// known), and one tilted more is still squared down to it.
+#[test]
+fn a_peg_whose_tilt_is_not_known_is_not_tilted_out() {
+    let mut p = ControllerParams::default();
+    p.face.estimate = true;
+    let kept = p.kept_tilt_deg;
+    for (tilt_deg, want) in [
+        (0.8 * kept, 0.0),
+        (0.0, 0.0),
+        (1.0, -p.max_tilt_rate_rad_per_s),
+    ] {
+        let mut c = Controller::new(p, Method::NoDither, WRIST, [0.0, 1e-3, 0.0], 0.5e-3);
+        c.step(&at([0.0, 0.6], 0.0, [0.0, -1e-5, 0.0]), 1e-4);
+        assert_eq!(c.phase(), Phase::Find);
         let before = c.target[2];
         c.step(
             &at([0.0, 1.0], 0.0, [0.0, -1e-5, tilt_deg.to_radians()]),
