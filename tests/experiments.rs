@@ -334,6 +334,32 @@ fn the_dither_method_inserts_where_its_baseline_does_not() {
     assert!(inside(&ok) > 0.7 && inside(&search) < 0.5);
 }
 
+/// The insertion experiment at `seed` with the options `set` changes.
+fn insertion_run(
+    seed: u64,
+    set: impl FnOnce(&mut afs_shared::insertion::rig::InsertionOptions),
+) -> afs_shared::insertion::monitor::InsertionRun {
+    let mut opts = Options {
+        seed,
+        ..Options::default()
+    };
+    set(&mut opts.insertion);
+    experiments::insertion(&opts).unwrap().summary.run
+}
+
+/// The ticks of `run` whose true state was `truth` and estimated `estimated`.
+fn wrong_ticks(
+    run: &afs_shared::insertion::monitor::InsertionRun,
+    truth: afs_shared::insertion::plant::ContactState,
+    estimated: afs_shared::insertion::plant::ContactState,
+) -> usize {
+    run.wrong_states
+        .iter()
+        .filter(|w| (w.truth, w.estimated) == (truth, estimated))
+        .map(|w| w.ticks)
+        .sum()
+}
+
 /// The part's orientation unknown: at seeds 53 and 162 (turned −0.44° and −1.90°) the face
 /// was named the chamfer for 8,100 ticks of the find phase while the estimator took the face's
 /// depth in the frame the robot believed (classification 0.78 and 0.81); from the face's line
@@ -343,19 +369,9 @@ fn an_unknown_parts_face_is_not_taken_for_the_chamfer() {
     use afs_shared::insertion::plant::ContactState;
     use afs_shared::insertion::rig::PartFrame;
     for seed in [53, 162] {
-        let mut opts = Options {
-            seed,
-            ..Options::default()
-        };
-        opts.insertion.part_frame = PartFrame::Unknown;
-        let run = experiments::insertion(&opts).unwrap().summary.run;
+        let run = insertion_run(seed, |o| o.part_frame = PartFrame::Unknown);
         assert!(run.inserted, "seed {seed}");
-        let face_as_chamfer: usize = run
-            .wrong_states
-            .iter()
-            .filter(|w| (w.truth, w.estimated) == (ContactState::Face, ContactState::Chamfer))
-            .map(|w| w.ticks)
-            .sum();
+        let face_as_chamfer = wrong_ticks(&run, ContactState::Face, ContactState::Chamfer);
         assert!(
             face_as_chamfer < run.classified_ticks / 100,
             "seed {seed}: {run:?}"
@@ -394,19 +410,11 @@ fn a_peg_resting_on_the_sharp_edge_is_on_the_face() {
     use afs_shared::insertion::drive::Drive;
     use afs_shared::insertion::plant::ContactState;
     for drive in [Drive::Ideal, Drive::Arm] {
-        let mut opts = Options {
-            seed: 53,
-            ..Options::default()
-        };
-        opts.insertion.chamfer_mm = 0.0;
-        opts.insertion.drive = drive;
-        let run = experiments::insertion(&opts).unwrap().summary.run;
-        let one_point_as_face: usize = run
-            .wrong_states
-            .iter()
-            .filter(|w| (w.truth, w.estimated) == (ContactState::OnePoint, ContactState::Face))
-            .map(|w| w.ticks)
-            .sum();
+        let run = insertion_run(53, |o| {
+            o.chamfer_mm = 0.0;
+            o.drive = drive;
+        });
+        let one_point_as_face = wrong_ticks(&run, ContactState::OnePoint, ContactState::Face);
         assert!(
             run.inserted && one_point_as_face < run.classified_ticks / 100,
             "{drive:?}: {run:?}"
@@ -426,13 +434,10 @@ fn a_peg_resting_on_the_sharp_edge_is_on_the_face() {
 fn the_arm_enters_a_sharp_edged_hole_corner_first() {
     use afs_shared::insertion::drive::Drive;
     for seed in [11, 132] {
-        let mut opts = Options {
-            seed,
-            ..Options::default()
-        };
-        opts.insertion.chamfer_mm = 0.0;
-        opts.insertion.drive = Drive::Arm;
-        let run = experiments::insertion(&opts).unwrap().summary.run;
+        let run = insertion_run(seed, |o| {
+            o.chamfer_mm = 0.0;
+            o.drive = Drive::Arm;
+        });
         assert!(run.inserted, "seed {seed}: {run:?}");
     }
 }

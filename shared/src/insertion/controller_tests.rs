@@ -13,13 +13,11 @@ fn at(force: [f64; 2], moment_nm: f64, tip: [f64; 3]) -> Input {
 }
 
 fn started(method: Method) -> Controller {
-    let mut c = Controller::new(
-        ControllerParams::default(),
-        method,
-        WRIST,
-        [0.0, 1e-3, 0.0],
-        0.5e-3,
-    );
+    started_with(ControllerParams::default(), method)
+}
+
+fn started_with(params: ControllerParams, method: Method) -> Controller {
+    let mut c = Controller::new(params, method, WRIST, [0.0, 1e-3, 0.0], 0.5e-3);
     // Contact: the approach ends where the peg is, without the wrist's lead.
     let (target, _) = c.step(&at([0.0, 0.6], 0.0, [0.0, -1e-5, 0.0]), 1e-4);
     assert_eq!(c.phase(), Phase::Find);
@@ -79,18 +77,22 @@ fn finding_the_hole_squares_the_peg_to_the_face() {
                 .min(p.max_tilt_rate_rad_per_s),
         ),
     ] {
-        let mut c = started(Method::NoDither);
-        let before = c.target[2];
-        c.step(
-            &at([0.0, 1.0], 0.0, [0.0, -1e-5, tilt_deg.to_radians()]),
-            1e-3,
-        );
-        let turned = (c.target[2] - before) / 1e-3;
-        assert!(
-            (turned - want).abs() < 1e-12,
-            "{tilt_deg}°: {turned} vs {want}"
-        );
+        assert_turned(started(Method::NoDither), tilt_deg, want);
     }
+}
+
+/// Pressed on the face at `tilt_deg` in the find phase, `c` turns the peg at `want` (rad/s).
+fn assert_turned(mut c: Controller, tilt_deg: f64, want: f64) {
+    let before = c.target[2];
+    c.step(
+        &at([0.0, 1.0], 0.0, [0.0, -1e-5, tilt_deg.to_radians()]),
+        1e-3,
+    );
+    let turned = (c.target[2] - before) / 1e-3;
+    assert!(
+        (turned - want).abs() < 1e-12,
+        "{tilt_deg}°: {turned} vs {want}"
+    );
 }
 
 /// With the part's orientation unknown and the face's line not yet found, a peg within the
@@ -106,19 +108,7 @@ fn a_peg_whose_tilt_is_not_known_is_not_tilted_out() {
         (0.0, 0.0),
         (1.0, -p.max_tilt_rate_rad_per_s),
     ] {
-        let mut c = Controller::new(p, Method::NoDither, WRIST, [0.0, 1e-3, 0.0], 0.5e-3);
-        c.step(&at([0.0, 0.6], 0.0, [0.0, -1e-5, 0.0]), 1e-4);
-        assert_eq!(c.phase(), Phase::Find);
-        let before = c.target[2];
-        c.step(
-            &at([0.0, 1.0], 0.0, [0.0, -1e-5, tilt_deg.to_radians()]),
-            1e-3,
-        );
-        let turned = (c.target[2] - before) / 1e-3;
-        assert!(
-            (turned - want).abs() < 1e-12,
-            "{tilt_deg}°: {turned} vs {want}"
-        );
+        assert_turned(started_with(p, Method::NoDither), tilt_deg, want);
     }
 }
 
