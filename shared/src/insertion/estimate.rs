@@ -1,4 +1,4 @@
-//! The contact state as the controller can know it (docs/insertion.md, *Contact states*): from
+//! The contact state as the controller can know it (docs/insertion.md, *The contact-state estimator*): from
 //! the wrist's force/torque sensor, the tip's measured depth below the face (whose height the
 //! robot knows) and the nominal chamfer, never from the part's true position.
 //!

@@ -95,7 +95,7 @@ pub struct Contact {
     pub along_peg_m: Option<f64>,
     /// What the contact state counts the contact as: `feature`, but for a part corner on the
     /// peg's tip the feature the peg rests on (the face at the hole's sharp edge, the chamfer
-    /// at its bottom edge), which is not in the hole (docs/insertion.md, *Contact states*).
+    /// at its bottom edge), which is not in the hole (docs/insertion.md, *The plant*).
     pub counted_as: Feature,
 }
 

@@ -74,7 +74,7 @@ impl PegParams {
     }
 }
 
-/// The true contact state (docs/insertion.md, *Contact states*).
+/// The true contact state (docs/insertion.md, *The plant*).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ContactState {
