@@ -501,7 +501,7 @@ impl Controller {
     /// against the hole the robot may not know: with the part's orientation unknown and the
     /// face's line not found, `prior_error_deg`). A peg that straddles the hole's edge, its
     /// lower corner in the hole and its higher one on the face or just above it, would
-    /// otherwise pass for one in the bore (docs/insertion.md, *The part's frame*).
+    /// otherwise pass for one in the bore (docs/insertion-frame.md).
     fn in_bore(&self, inp: &Input) -> bool {
         let f = &self.params.face;
         let unknown = if f.estimate && !self.face.believed() {

@@ -1,4 +1,4 @@
-//! The arm that carries the wrist (docs/insertion.md, *The arm*): the three-joint arm of
+//! The arm that carries the wrist (docs/insertion-arm.md): the three-joint arm of
 //! [`Scara`] with its dynamics, its flange holding the peg through the compliant wrist, and the
 //! servo that drives it as the thesis's hybrid controller does (§3.3, fig. 3.4): the insertion
 //! controller's position updates (force along the hole's axis, position or force across it and

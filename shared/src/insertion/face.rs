@@ -1,4 +1,4 @@
-//! The part's face as the find phase finds it (docs/insertion.md, *The face's tangent*): the
+//! The part's face as the find phase finds it (docs/insertion-frame.md, *The face.s tangent from the corner*): the
 //! robot does not know the part's orientation, so it estimates the face's tangent from where
 //! the part touches the peg.
 //!

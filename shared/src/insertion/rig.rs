@@ -1,4 +1,4 @@
-//! One insertion as a servo runs it (docs/insertion.md, *On the stack*): the peg's plant, the
+//! One insertion as a servo runs it (docs/insertion-stack.md): the peg's plant, the
 //! insertion controller and the contact-state estimator, stepped a tick at a time from the
 //! wrist sensor's tared readings. One piece of code for `afs experiment insertion`, the
 //! `insertion` scenario's lockstep reference and the servo board, so the three run the same
@@ -47,7 +47,7 @@ pub struct InsertionOptions {
     pub part_frame: PartFrame,
 }
 
-/// What the robot knows of the part's orientation (docs/insertion.md, *The part's frame*).
+/// What the robot knows of the part's orientation (docs/insertion-frame.md).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum PartFrame {
@@ -267,8 +267,7 @@ impl InsertionRig {
         let (lateral, angle) = o.initial_errors(seed);
         let start = [lateral, 1e-3, angle];
         // Not knowing the part's orientation, the robot believes its peg square to the part:
-        // its frame is the part's turned by the angle error (docs/insertion.md, *The part's
-        // frame*).
+        // its frame is the part's turned by the angle error (docs/insertion-frame.md).
         let robot = RobotFrame {
             angle_rad: match o.part_frame {
                 PartFrame::Known => 0.0,

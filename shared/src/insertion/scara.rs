@@ -1,5 +1,5 @@
 //! The thesis's two-link arm with a third, wrist joint (a planar SCARA-like arm, §5.4's x, y
-//! and θ; docs/insertion.md, *The wrist*): kinematics of the tool pose (x, y, φ), its
+//! and θ; docs/insertion.md, *The wrist (first step)*): kinematics of the tool pose (x, y, φ), its
 //! Jacobian, the closed-form inverse, and the rigid-body dynamics M(q) q̈ + h(q, q̇).
 //!
 //! Links 1 and 2 are [`Arm`]'s, with its tip mass at the wrist joint; the wrist link (motor

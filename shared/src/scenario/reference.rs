@@ -187,7 +187,7 @@ pub fn compare(stack: &ScenarioReport, reference: &ScenarioReport) -> Agreement 
     }
 }
 
-/// The insertion's figures (tolerances justified in docs/insertion.md, *On the stack*): the
+/// The insertion's figures (tolerances justified in docs/insertion-stack.md): the
 /// outcome (unless a run cut short ended before the other's was done) and whether the force
 /// stayed in its limit `limit_n` must be the same; time and
 /// classification may move by what the sensor's noise meeting the plant at other instants

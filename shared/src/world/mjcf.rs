@@ -255,7 +255,7 @@ pub fn generate(cfg: &SimConfig, solref: Option<ContactSolref>) -> String {
 }
 
 /// The three-joint arm of [`Scara`](crate::insertion::scara::Scara) as MJCF, for checking
-/// MuJoCo's dynamics of it against the closed form (docs/insertion.md, *The arm*): links 1 and
+/// MuJoCo's dynamics of it against the closed form (docs/insertion-arm.md): links 1 and
 /// 2 as [`link_bodies`] makes them, the wrist link a third body on a hinge at link 2's end with
 /// its mass at `com_m` and its inertia, the site `tool` at its tool point. No gravity, no
 /// damping, no contact: the insertion's peg and hole are not in MuJoCo yet.

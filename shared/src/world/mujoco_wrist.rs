@@ -1,5 +1,5 @@
 //! MuJoCo's dynamics of the three-joint arm against the closed form of
-//! [`Scara`](crate::insertion::scara::Scara) (docs/insertion.md, *The arm*): the model
+//! [`Scara`](crate::insertion::scara::Scara) (docs/insertion-arm.md): the model
 //! [`mjcf::scara`] writes has, at any state, MuJoCo's joint-space inertia equal to `M(q)` and
 //! its bias forces equal to `h(q, q̇)`; stepped under the same torques, the two agree.
 
