@@ -8,19 +8,23 @@
 //! whether the thesis's rig is defined for it, the function): the CLI's names, `--rig
 //! thesis` and the docs' table (`afs experiment list`, docs/experiments.md) all read it.
 
+mod corners;
 mod curves;
 mod identification;
 mod insertion;
 mod multicontact;
+mod nominal;
 mod recursive;
 mod suppression;
 mod tracking;
 mod tuning;
 
+pub use corners::*;
 pub use curves::*;
 pub use identification::*;
 pub use insertion::*;
 pub use multicontact::*;
+pub use nominal::*;
 pub use recursive::*;
 pub use suppression::*;
 pub use tracking::*;
