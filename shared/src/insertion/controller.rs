@@ -461,6 +461,9 @@ impl Controller {
         if find && self.in_bore(pin) {
             self.next(self.after_find());
         }
+        if self.phase == Phase::Align && self.straddles(pin) {
+            self.next(Phase::Find);
+        }
         if self.phase == Phase::Align && self.aligned(pin, dt) {
             self.next(Phase::Insert);
         }
@@ -516,6 +519,23 @@ impl Controller {
         };
         let upper = self.depth_m(inp.tip[1]) - 0.5 * self.params.peg_width_m * tilt;
         upper > self.in_hole_depth_m
+    }
+
+    /// In the align phase: the peg is back on the face, straddling the hole's edge. The part
+    /// holds the tip face up (the force along the axis at least half the align force, the
+    /// lateral force under half of it: not a chamfer's or a wall's push) at one of its ends
+    /// (the centre of pressure, x_c = M/F_y, within a fifth of the half-width of a corner),
+    /// and that end is not in the bore. A peg that dipped into the hole for a moment and came
+    /// back up onto the edge would otherwise be aligned there: the moment loop turns it about
+    /// its tip, the higher corner pivoting on the edge, further off square (arm, c = 0.002,
+    /// μ = 0.1, no chamfer, seed 13: 1.4° to 8° in 3 s, docs/insertion-arm.md).
+    fn straddles(&self, inp: &Input) -> bool {
+        let p = &self.params;
+        let [f_x, f_y] = inp.force;
+        f_y >= 0.5 * p.align_force_n
+            && f_x.abs() < 0.5 * f_y
+            && (inp.moment_nm / f_y).abs() >= 0.8 * 0.5 * p.peg_width_m
+            && !self.in_bore(inp)
     }
 
     /// The phase after the find phase: the search inserts, the others align first.

@@ -156,3 +156,30 @@ fn in_the_hole_dither_aligns_and_search_inserts() {
     s.step(&at([0.0, 2.0], 0.0, deep), 1e-4);
     assert_eq!(s.phase(), Phase::Insert);
 }
+
+/// In the align phase, a peg whose tip face's higher end rests on the part (the centre of
+/// pressure 4.5 mm out, the lateral force small) with that end not in the bore is back on the
+/// face: it finds the hole again. The same wrench with the peg in the bore (a two-point
+/// contact's couple can put the centre of pressure there), or a chamfer's push (the lateral
+/// force as large as the axial), leaves it aligning.
+#[test]
+fn a_peg_back_on_the_edge_finds_the_hole_again() {
+    let p = ControllerParams::default();
+    let deep = [0.0, -1.2e-3, 0.0];
+    // The chamfer 0.5 mm deep; tilted 1.4°, the tip's centre 0.6 mm down: its higher corner
+    // 0.12 mm above the centre, 0.48 mm down, above the chamfer's bottom.
+    let on_edge = [0.0, -0.6e-3, 1.4f64.to_radians()];
+    let f = 1.0;
+    for (force, tip, want) in [
+        ([0.05, f], on_edge, Phase::Find),
+        ([0.05, f], deep, Phase::Align),
+        ([0.8, f], on_edge, Phase::Align),
+        ([0.05, f], [0.0, -0.65e-3, 0.0], Phase::Align),
+    ] {
+        let mut c = started(Method::Dither);
+        c.step(&at([0.0, 2.0], 0.0, deep), 1e-4);
+        assert_eq!(c.phase(), Phase::Align);
+        c.step(&at(force, 0.9 * 0.5 * p.peg_width_m * f, tip), 1e-4);
+        assert_eq!(c.phase(), want, "{force:?} at {tip:?}");
+    }
+}
