@@ -250,6 +250,17 @@ impl BoxPlant {
     }
 }
 
+/// A commanded pose rotated by `angle` (rad) about `centre` (m).
+pub fn rotate_about(pose: Pose, centre: Vec2, angle: f64) -> Pose {
+    let (s, c) = angle.sin_cos();
+    let d = Vec2::new(pose[0], pose[1]) - centre;
+    [
+        centre.x + c * d.x - s * d.y,
+        centre.y + s * d.x + c * d.y,
+        pose[2] + angle,
+    ]
+}
+
 /// P from the in-phase force responses per radian `g_i` of rotational dithers about centres
 /// `c_i` (at least three, not collinear): least squares of `g = A c + b`, then `P = −A⁻¹ b`.
 pub fn rotation_centre(centres: &[Vec2], responses: &[Vec2]) -> Option<Vec2> {

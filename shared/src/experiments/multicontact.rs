@@ -4,7 +4,9 @@
 use super::*;
 use crate::error::ExperimentError;
 use crate::math::{Vec2, cross};
-use crate::multicontact::{BoxParams, BoxPlant, Pose, estimate_rotation_centre, friction_filter};
+use crate::multicontact::{
+    BoxParams, BoxPlant, Pose, estimate_rotation_centre, friction_filter, rotate_about,
+};
 use crate::sensor::{SensorModel, SensorParams, Wrench};
 use crate::world::BoxWorld;
 use serde::Serialize;
@@ -113,17 +115,6 @@ fn settle(rig: &mut Rig, p_hat: Vec2, tare: Vec2, target: Vec2, supp_amp: f64, s
         let t = rotate_about(rig.target, p_hat, supp);
         rig.step(t, [0.0; 3]);
     }
-}
-
-/// The commanded pose rotated by `angle` about `centre`.
-fn rotate_about(pose: Pose, centre: Vec2, angle: f64) -> Pose {
-    let (s, c) = angle.sin_cos();
-    let d = Vec2::new(pose[0], pose[1]) - centre;
-    [
-        centre.x + c * d.x - s * d.y,
-        centre.y + s * d.x + c * d.y,
-        pose[2] + angle,
-    ]
 }
 
 /// Rotates the box, held by a compliant grip and pushed into a corner (floor and wall), from a

@@ -3,8 +3,10 @@
 //! conditions ([`whitney`]), the insertion controller and its baselines ([`controller`]), the
 //! contact state as the controller can know it ([`estimate`]), the three stepped together as a
 //! servo runs them ([`rig`]) and measured ([`monitor`]), and the arm with a wrist joint
-//! ([`scara`]) that can carry the wrist ([`drive`]).
+//! ([`scara`]) that can carry the wrist ([`drive`]), and §5.4's rotation centre on the peg in
+//! two-point contact ([`centre`], measured, not used by the controller).
 
+pub mod centre;
 pub mod controller;
 pub mod drive;
 pub mod estimate;
