@@ -68,6 +68,43 @@ fn the_fit_finds_where_a_linear_response_vanishes() {
     let rank_one = Matrix3x2::new(1.0, 2.0, 2.0, 4.0, 3.0, 6.0);
     assert_eq!(fit_centre(&cs, &respond(&cs, &rank_one), arm), None);
     assert_eq!(fit_centre(&cs, &[[f64::NAN; 3]; 3], arm), None);
+    // Rank one to 1e-7 of its scale is rank one (the bound is relative).
+    let nearly = Matrix3x2::new(1e3, 2e3, 2e3, 4e3 + 2e-3, 3e3, 6e3);
+    assert_eq!(fit_centre(&cs, &respond(&cs, &nearly), arm), None);
+}
+
+/// With responses that disagree, the moment weighs as a force at the moment arm: the lateral
+/// force's row puts P_y at 0, the axial force's at 2 mm and the moment's (1 N·m per rad per
+/// metre at a 10-mm arm: 100 N per rad per metre) at 4 mm; the axial force's and the
+/// moment's rows weigh the same (100), so P_y is their mean, 3 mm, and P_x, which only the
+/// lateral force's row has, is exact.
+#[test]
+fn the_moment_weighs_as_a_force_at_its_arm() {
+    let arm = 0.01;
+    let cs = [
+        Vec2::new(0.0, -0.001),
+        Vec2::new(0.0, 0.009),
+        Vec2::new(0.005, -0.001),
+    ];
+    let w = cs.map(|c| {
+        [
+            100.0 * (c.x - 0.001),
+            100.0 * (c.y - 0.002),
+            1.0 * (c.y - 0.004),
+        ]
+    });
+    let est = fit_centre(&cs, &w, arm).unwrap();
+    assert!((est - Vec2::new(0.001, 0.003)).norm() < 1e-12, "{est:?}");
+}
+
+/// Two contacts with parallel normals (the peg flat on the face, on its two tip corners)
+/// meet nowhere; nor do other than two contacts.
+#[test]
+fn parallel_normals_meet_nowhere() {
+    let g = peg(0.3).geometry;
+    assert_eq!(normals_meet(&g, [0.02, -1e-6, 0.0]), None);
+    assert_eq!(normals_meet(&g, [0.02, 1e-3, 0.0]), None);
+    assert_eq!(two_point_pose(&g, std::f64::consts::FRAC_PI_2), None);
 }
 
 /// Frictionless, the peg in two-point contact turns about where its normals meet, and the
