@@ -197,7 +197,7 @@ impl ProbeRunner {
 
 /// Raised-cosine envelope over [0, total] with ramps of `ramp` at both ends: value and its
 /// first two time derivatives.
-fn envelope(tau: f64, ramp: f64, total: f64) -> (f64, f64, f64) {
+pub(crate) fn envelope(tau: f64, ramp: f64, total: f64) -> (f64, f64, f64) {
     if ramp <= 0.0 {
         return (1.0, 0.0, 0.0);
     }

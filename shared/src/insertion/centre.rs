@@ -68,7 +68,7 @@ pub fn two_point_pose(g: &PegHoleGeometry, theta: f64) -> Option<[f64; 3]> {
 /// Where the two normals of the two-point pose meet, in closed form (m): the wall's normal
 /// is the horizontal line through the tip corner, the edge's the line through the edge along
 /// the peg's side direction s, so P = edge + s t with t = y_corner / sin θ, and P is
-/// l cot θ − d ≈ l/θ to the left of the edge.
+/// (l cot θ − d) cos θ ≈ l/θ to the left of the edge.
 pub fn two_point_centre(g: &PegHoleGeometry, theta: f64) -> Option<Vec2> {
     let pose = two_point_pose(g, theta)?;
     let (_, side) = peg_axes(theta);
@@ -147,12 +147,7 @@ pub fn probe<S: FnMut([f64; 3]) -> (Vec2, f64)>(
         let mut rec: [Vec<(f64, f64, f64)>; 3] = Default::default();
         for i in 0..n {
             let tau = i as f64 * dt;
-            let edge = tau.min(total - tau);
-            let ramp = if edge < p.ramp_s {
-                0.5 * (1.0 - (std::f64::consts::PI * edge / p.ramp_s).cos())
-            } else {
-                1.0
-            };
+            let ramp = crate::probe::envelope(tau, p.ramp_s, total).0;
             let phase = omega * (tau - p.ramp_s);
             let mut target = rotate_about(hold, *c, ramp * p.amplitude_rad * phase.sin());
             let axial = p.axial_m * (std::f64::consts::TAU * p.axial_hz * t).sin();
@@ -160,7 +155,7 @@ pub fn probe<S: FnMut([f64; 3]) -> (Vec2, f64)>(
             target[1] += axis.y * axial;
             let (f, m) = step(target);
             t += dt;
-            if edge >= p.ramp_s {
+            if tau >= p.ramp_s && tau <= total - p.ramp_s {
                 for (r, v) in rec.iter_mut().zip([f.x, f.y, m]) {
                     r.push((t, phase, v));
                 }
@@ -174,7 +169,7 @@ pub fn probe<S: FnMut([f64; 3]) -> (Vec2, f64)>(
 }
 
 /// One probe of the peg in Whitney's two-point contact at tilt `theta` (rad), held there by
-/// the wrist with a 20 mN·m moment towards a larger tilt, sensed by the default sensor at
+/// the wrist with a moment (20 mN·m by default) towards a larger tilt, sensed by the default sensor at
 /// `seed` (σ 0.02 N, 0.5 mN·m, 7 kHz).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TwoPointProbe {
@@ -186,15 +181,21 @@ pub struct TwoPointProbe {
     pub state: ContactState,
 }
 
-/// Runs [`TwoPointProbe`] for the peg `params` (its friction law as given).
-pub fn probe_two_point(params: PegParams, theta: f64, seed: u64) -> Option<TwoPointProbe> {
+/// Runs [`TwoPointProbe`] for the peg `params` (its friction law as given),
+/// held with `hold_moment_nm` (N·m).
+pub fn probe_two_point(
+    params: PegParams,
+    theta: f64,
+    hold_moment_nm: f64,
+    seed: u64,
+) -> Option<TwoPointProbe> {
     let dt = 1e-4;
     let start = two_point_pose(&params.geometry, theta)?;
     let mut plant = PegPlant::new(params, start);
     let hold = [
         start[0],
         start[1],
-        start[2] + 0.02 / params.wrist_stiffness[2],
+        start[2] + hold_moment_nm / params.wrist_stiffness[2],
     ];
     for _ in 0..3000 {
         plant.step(hold, [0.0; 3], dt);
