@@ -451,7 +451,7 @@ fn bad_insertion_options_are_refused_by_name() {
         ("--mu", "nan", "insertion.mu"),
         ("--lateral-mm", "-9", "insertion.lateral_mm"),
         ("--angle-deg", "inf", "insertion.angle_deg"),
-        ("--plant", "mujoco", "built-in plant only"),
+        ("--plant", "bullet", "possible values: builtin, mujoco"),
         ("--drive", "wrist", "--drive"),
     ] {
         let out = afs()

@@ -1,11 +1,13 @@
 //! MuJoCo as the world (docs/mujoco.md): the experiments that track a surface and suppress
 //! friction hold on it and on the built-in plant at the thesis's 10 kHz and at a real robot's
 //! 1 kHz and 500 Hz; the stack runs on MuJoCo against its MuJoCo lockstep, and a killed servo
-//! resumes MuJoCo's full state so the agreement holds across the kill.
+//! resumes MuJoCo's full state so the agreement holds across the kill; the peg goes into its
+//! hole on MuJoCo's contacts.
 #![cfg(feature = "mujoco")]
 
 use afs_shared::check::{self, Check};
 use afs_shared::experiments::{self, Options};
+use afs_shared::insertion::drive::Drive;
 use afs_shared::setups::{ROBOT_RATES_HZ, set_rate};
 use afs_shared::sim::SimConfig;
 use afs_shared::world::WorldKind;
@@ -85,6 +87,41 @@ fn the_box_finds_its_rotation_centre_on_mujoco() {
         .output()
         .unwrap();
     assert_refused(&refused, &"fig5.9 --mjcf", "§5.4's box has no arm");
+}
+
+/// The insertion on MuJoCo's peg and hole (docs/insertion-mujoco.md): from seed 1's errors the
+/// peg goes in on both drives with every check passing, and the report names MuJoCo; a model
+/// of the user's own is refused for it (exit 2).
+#[test]
+fn the_peg_goes_in_on_mujoco() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    for drive in [Drive::Ideal, Drive::Arm] {
+        let mut opts = options(WorldKind::Mujoco, 10_000.0);
+        opts.insertion.drive = drive;
+        let out = experiments::insertion(&opts).unwrap();
+        assert_eq!(out.summary.world, "mujoco");
+        for c in &out.checks {
+            assert!(
+                c.pass,
+                "insertion on mujoco, {}: {}",
+                drive.name(),
+                c.line()
+            );
+        }
+    }
+    let refused = afs()
+        .args(["experiment", "insertion", "--mjcf"])
+        .arg(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/examples/mujoco/user-arm.xml"
+        ))
+        .output()
+        .unwrap();
+    assert_refused(
+        &refused,
+        &"insertion --mjcf",
+        "afs's generated peg and hole",
+    );
 }
 
 /// `afs run --config examples/stack-mujoco.toml`: the servo steps MuJoCo, the supervisor's

@@ -507,8 +507,7 @@ pub fn command(a: &ExperimentArgs, stop: &AtomicBool) -> Result<ExitCode> {
             .filter(|e| rig == Rig::Afs || e.friction)
             .filter(|e| {
                 opts.base.world.kind == afs_shared::world::WorldKind::Builtin
-                    || !(experiments::WORLD_FREE.contains(&e.name)
-                        || experiments::BUILTIN_ONLY.contains(&e.name))
+                    || !experiments::WORLD_FREE.contains(&e.name)
             })
             .map(|e| e.name)
             .collect(),

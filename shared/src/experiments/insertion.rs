@@ -3,7 +3,6 @@
 //! jams and wedges.
 
 use super::*;
-use crate::error::ConfigError;
 use crate::insertion::monitor::{InsertionMonitor, InsertionRun, PegTick};
 use crate::insertion::whitney::Fit;
 use crate::sensor::{SensorModel, Wrench};
@@ -19,6 +18,8 @@ pub struct InsertionSummary {
     pub method: &'static str,
     /// What positions the wrist's flange: `ideal` or `arm`.
     pub drive: &'static str,
+    /// The peg's world: `builtin` (afs's contacts) or `mujoco` (MuJoCo's).
+    pub world: &'static str,
     /// Clearance ratio, μ, chamfer (mm).
     pub clearance_ratio: f64,
     /// μ.
@@ -44,14 +45,13 @@ pub struct InsertionSummary {
 /// face, offset and tilted by the seed's errors, and the controller inserts it 15 mm.
 pub fn insertion(opts: &Options) -> Result<Outcome<InsertionSummary>, ExperimentError> {
     let o = opts.insertion;
-    check_world(opts)?;
     let fit = o.fit();
-    let mut rig = InsertionRig::new(&o, opts.seed)?;
+    let dt = opts.base.servo.dt();
+    let mut rig = InsertionRig::on_world(&o, opts.seed, &opts.base.world, dt)?;
     let sensor_params = opts.base.sensor;
     let mut sensor = SensorModel::new(sensor_params, opts.seed);
     let tare = crate::sim::tare(&mut sensor);
-    // The servo's period (10 kHz; `--rate-hz` sets a real robot's 1 kHz or 500 Hz).
-    let dt = opts.base.servo.dt();
+    // The servo's period (10 kHz; `--rate-hz` sets a real robot's 1 kHz or 500 Hz): `dt`.
     let mut monitor = InsertionMonitor::new(dt, fit, o.force_limit_n());
     let (mut reading, mut next_sample, period) =
         (Wrench::default(), 0.0, 1.0 / sensor_params.rate_hz);
@@ -98,6 +98,7 @@ pub fn insertion(opts: &Options) -> Result<Outcome<InsertionSummary>, Experiment
         summary: InsertionSummary {
             method: o.method.name(),
             drive: o.drive.name(),
+            world: rig.world().kind().name(),
             clearance_ratio: o.clearance_ratio,
             mu: o.mu,
             chamfer_mm: o.chamfer_mm,
@@ -110,18 +111,6 @@ pub fn insertion(opts: &Options) -> Result<Outcome<InsertionSummary>, Experiment
         checks,
         figure,
     })
-}
-
-/// Insertion runs on the built-in plant only (the peg and the hole are not MuJoCo contacts yet).
-fn check_world(opts: &Options) -> Result<(), ConfigError> {
-    if opts.base.world.kind != crate::world::WorldKind::Builtin {
-        return Err(ConfigError::rule(
-            "world.kind",
-            "is `mujoco`; insertion runs on the built-in plant only: the peg and the hole are \
-             not MuJoCo contacts yet (docs/insertion.md); run it without --plant",
-        ));
-    }
-    Ok(())
 }
 
 /// The insertion's checks.

@@ -141,9 +141,6 @@ registry! {
 /// `--plant mujoco` is refused for them.
 pub const WORLD_FREE: &[&str] = &["fig4.1", "fig4.2", "fig4.3", "fig4.4"];
 
-/// Experiments that run on the built-in plant only (`all --plant mujoco` leaves them out).
-pub const BUILTIN_ONLY: &[&str] = &["insertion"];
-
 /// The experiment named `name`.
 pub fn find(name: &str) -> Option<&'static Experiment> {
     REGISTRY.iter().find(|e| e.name == name)

@@ -4,7 +4,8 @@
 //! contact state as the controller can know it ([`estimate`]), the three stepped together as a
 //! servo runs them ([`rig`]) and measured ([`monitor`]), and the arm with a wrist joint
 //! ([`scara`]) that can carry the wrist ([`drive`]), and §5.4's rotation centre on the peg in
-//! two-point contact ([`centre`], measured, not used by the controller).
+//! two-point contact ([`centre`], measured, not used by the controller); the peg in afs's
+//! plant or MuJoCo's ([`world`]).
 
 pub mod centre;
 pub mod controller;
@@ -17,3 +18,4 @@ pub mod plant;
 pub mod rig;
 pub mod scara;
 pub mod whitney;
+pub mod world;

@@ -158,8 +158,8 @@ pub trait Flange {
     fn react(&mut self, force: Vec2, moment_nm: f64, h: f64);
 }
 
-/// A flange exactly at its commanded pose: an ideal position-controlled arm.
-struct Commanded([f64; 3], [f64; 3]);
+/// A flange exactly at its commanded pose (the pose, its rate): an ideal position-controlled arm.
+pub(crate) struct Commanded(pub(crate) [f64; 3], pub(crate) [f64; 3]);
 
 impl Flange for Commanded {
     fn pose(&self) -> ([f64; 3], [f64; 3]) {
@@ -232,9 +232,7 @@ impl PegPlant {
 
     /// The tip's pose.
     pub fn tip_pose(&self) -> [f64; 3] {
-        let (axis, _) = peg_axes(self.q[2]);
-        let tip = Vec2::new(self.q[0], self.q[1]) - axis * self.params.com_above_tip_m;
-        [tip.x, tip.y, self.q[2]]
+        tip_of(&self.params, self.q)
     }
 
     /// The whole state, for a restarted servo to resume ([`PegPlant::restore`]).
@@ -289,7 +287,7 @@ impl PegPlant {
             let (f, m) = self.contact_wrench(&found[..count], h);
             self.last_contact = (f, m);
             let (target, target_vel) = flange.pose();
-            let (wf, pure, wm) = self.wrist_wrench(target, target_vel);
+            let (wf, pure, wm) = wrist_wrench(&self.params, self.q, self.v, target, target_vel);
             self.last_wrist = (wf, wm);
             let p = &self.params;
             let acc = [
@@ -304,33 +302,6 @@ impl PegPlant {
             flange.react(-wf, -pure, h);
         }
         self.truth = self.observe(&found[..count], count);
-    }
-
-    /// The wrist's force at the peg's compliance centre, its pure moment (the rotational
-    /// spring and damper) and their moment about the centre of mass, pulling the peg towards
-    /// the flange's pose.
-    fn wrist_wrench(&self, target: [f64; 3], target_vel: [f64; 3]) -> (Vec2, f64, f64) {
-        let p = &self.params;
-        let h = p.compliance_above_tip_m;
-        let tip = self.tip_pose();
-        let at = Vec2::new(tip[0], tip[1]) + peg_axes(tip[2]).0 * h;
-        let (axis_d, _) = peg_axes(target[2]);
-        let want = Vec2::new(target[0], target[1]) + axis_d * h;
-        let com = Vec2::new(self.q[0], self.q[1]);
-        let r = at - com;
-        let vel = Vec2::new(self.v[0], self.v[1]) + perp(r) * self.v[2];
-        let want_vel = Vec2::new(target_vel[0], target_vel[1]) + perp(axis_d * h) * target_vel[2];
-        let k = p.wrist_stiffness;
-        let z = p.wrist_damping_ratio;
-        let c_lin = 2.0 * z * (k[0].max(k[1]) * p.mass_kg).sqrt();
-        let inertia_at_centre = p.inertia_kg_m2 + p.mass_kg * r.norm_squared();
-        let c_rot = 2.0 * z * (k[2] * inertia_at_centre).sqrt();
-        let f = Vec2::new(
-            k[0] * (want.x - at.x) + c_lin * (want_vel.x - vel.x),
-            k[1] * (want.y - at.y) + c_lin * (want_vel.y - vel.y),
-        );
-        let m = k[2] * (target[2] - self.q[2]) + c_rot * (target_vel[2] - self.v[2]);
-        (f, m, m + cross(r, f))
     }
 
     /// The contact forces' resultant on the peg and their moment about the centre of mass;
@@ -385,29 +356,84 @@ impl PegPlant {
 
     /// The truth at the present state with the contacts `found`.
     fn observe(&self, found: &[Contact], count: usize) -> PegTruth {
-        let tip_pose = self.tip_pose();
-        let tip = Vec2::new(tip_pose[0], tip_pose[1]);
-        let com = Vec2::new(self.q[0], self.q[1]);
-        let r_tip = tip - com;
-        let tip_vel = Vec2::new(self.v[0], self.v[1]) + perp(r_tip) * self.v[2];
-        let p = &self.params;
-        // A wrench (force, moment about the centre of mass) with its moment taken about the tip.
-        let about_tip = |(f, m): (Vec2, f64)| (f, m + cross(com - tip, f));
-        let (force, moment) = about_tip(self.last_contact);
-        let (applied_force, applied_moment) = about_tip(self.last_wrist);
-        let (state, edge) = classify(found, &self.normal_n, tip_vel.y, p);
-        PegTruth {
-            pose: tip_pose,
-            velocity: [tip_vel.x, tip_vel.y, self.v[2]],
-            force,
-            moment_about_tip: moment,
-            applied_force,
-            applied_moment_about_tip: applied_moment,
-            contacts: count,
-            state,
-            depth_m: -tip.y,
-            edge_along_peg_m: edge,
-        }
+        let motion = (self.q, self.v);
+        let wrenches = (self.last_contact, self.last_wrist);
+        truth_at(&self.params, motion, wrenches, found, count, &self.normal_n)
+    }
+}
+
+/// The tip's pose (x, y, θ) of the peg whose centre of mass and tilt are `q`.
+pub(crate) fn tip_of(p: &PegParams, q: [f64; 3]) -> [f64; 3] {
+    let (axis, _) = peg_axes(q[2]);
+    let tip = Vec2::new(q[0], q[1]) - axis * p.com_above_tip_m;
+    [tip.x, tip.y, q[2]]
+}
+
+/// The wrist's force at the peg's compliance centre, its pure moment (the rotational spring
+/// and damper) and their moment about the centre of mass, pulling the peg (centre of mass and
+/// tilt `q`, their rates `v`) towards the flange's pose `target` moving at `target_vel`.
+pub(crate) fn wrist_wrench(
+    p: &PegParams,
+    q: [f64; 3],
+    v: [f64; 3],
+    target: [f64; 3],
+    target_vel: [f64; 3],
+) -> (Vec2, f64, f64) {
+    let h = p.compliance_above_tip_m;
+    let tip = tip_of(p, q);
+    let at = Vec2::new(tip[0], tip[1]) + peg_axes(tip[2]).0 * h;
+    let (axis_d, _) = peg_axes(target[2]);
+    let want = Vec2::new(target[0], target[1]) + axis_d * h;
+    let com = Vec2::new(q[0], q[1]);
+    let r = at - com;
+    let vel = Vec2::new(v[0], v[1]) + perp(r) * v[2];
+    let want_vel = Vec2::new(target_vel[0], target_vel[1]) + perp(axis_d * h) * target_vel[2];
+    let k = p.wrist_stiffness;
+    let z = p.wrist_damping_ratio;
+    let c_lin = 2.0 * z * (k[0].max(k[1]) * p.mass_kg).sqrt();
+    let inertia_at_centre = p.inertia_kg_m2 + p.mass_kg * r.norm_squared();
+    let c_rot = 2.0 * z * (k[2] * inertia_at_centre).sqrt();
+    let f = Vec2::new(
+        k[0] * (want.x - at.x) + c_lin * (want_vel.x - vel.x),
+        k[1] * (want.y - at.y) + c_lin * (want_vel.y - vel.y),
+    );
+    let m = k[2] * (target[2] - q[2]) + c_rot * (target_vel[2] - v[2]);
+    (f, m, m + cross(r, f))
+}
+
+/// The truth of the peg at centre of mass and tilt `q` moving at `v` (the `motion`), with the
+/// last sub-step's contact and wrist wrenches (force, moment about the centre of mass), the
+/// contacts `found` at the pose that sub-step started from and each slot's normal force.
+pub(crate) fn truth_at(
+    p: &PegParams,
+    motion: ([f64; 3], [f64; 3]),
+    wrenches: ((Vec2, f64), (Vec2, f64)),
+    found: &[Contact],
+    count: usize,
+    normal_n: &[f64; SLOTS],
+) -> PegTruth {
+    let (q, v) = motion;
+    let tip_pose = tip_of(p, q);
+    let tip = Vec2::new(tip_pose[0], tip_pose[1]);
+    let com = Vec2::new(q[0], q[1]);
+    let r_tip = tip - com;
+    let tip_vel = Vec2::new(v[0], v[1]) + perp(r_tip) * v[2];
+    // A wrench (force, moment about the centre of mass) with its moment taken about the tip.
+    let about_tip = |(f, m): (Vec2, f64)| (f, m + cross(com - tip, f));
+    let (force, moment) = about_tip(wrenches.0);
+    let (applied_force, applied_moment) = about_tip(wrenches.1);
+    let (state, edge) = classify(found, normal_n, tip_vel.y, p);
+    PegTruth {
+        pose: tip_pose,
+        velocity: [tip_vel.x, tip_vel.y, v[2]],
+        force,
+        moment_about_tip: moment,
+        applied_force,
+        applied_moment_about_tip: applied_moment,
+        contacts: count,
+        state,
+        depth_m: -tip.y,
+        edge_along_peg_m: edge,
     }
 }
 

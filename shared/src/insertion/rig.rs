@@ -7,11 +7,13 @@
 use super::controller::{Controller, ControllerParams, ControllerState, Input, Method, Phase};
 use super::drive::{ArmDrive, ArmDriveParams, ArmDriveState, Drive};
 use super::estimate::{Estimator, EstimatorState};
-use super::plant::{ContactState, PegParams, PegPlant, PegPlantState, PegTruth};
+use super::plant::{ContactState, PegParams, PegPlantState, PegTruth};
 use super::whitney::Fit;
+use super::world::PegWorld;
 use crate::error::ConfigError;
 use crate::math::turn;
 use crate::sensor::Wrench;
+use crate::world::WorldConfig;
 use rand_chacha::ChaCha8Rng;
 use rand_chacha::rand_core::SeedableRng;
 use rand_distr::{Distribution, Uniform};
@@ -207,7 +209,7 @@ pub struct RigState {
 /// The plant, the controller and the estimator of one insertion.
 #[derive(Debug, Clone)]
 pub struct InsertionRig {
-    plant: PegPlant,
+    plant: PegWorld,
     arm: Option<ArmDrive>,
     ctl: Controller,
     estimator: Estimator,
@@ -258,9 +260,20 @@ impl RobotFrame {
 }
 
 impl InsertionRig {
-    /// The insertion of `o` at `seed`: the peg 1 mm above the face, offset and tilted by the
-    /// seed's initial errors.
+    /// The insertion of `o` at `seed` on the built-in plant: the peg 1 mm above the face,
+    /// offset and tilted by the seed's initial errors.
     pub fn new(o: &InsertionOptions, seed: u64) -> Result<Self, ConfigError> {
+        Self::on_world(o, seed, &WorldConfig::default(), 1e-4)
+    }
+
+    /// The insertion of `o` at `seed` in the world `world` names (the built-in plant or
+    /// MuJoCo's), stepped every `dt` seconds.
+    pub fn on_world(
+        o: &InsertionOptions,
+        seed: u64,
+        world: &WorldConfig,
+        dt: f64,
+    ) -> Result<Self, ConfigError> {
         o.validate()?;
         let params = o.peg_params();
         let g = params.geometry;
@@ -285,7 +298,7 @@ impl InsertionRig {
             )?),
         };
         Ok(Self {
-            plant: PegPlant::new(params, start),
+            plant: PegWorld::new(params, start, world, dt)?,
             arm,
             ctl: Controller::new(
                 ctl_params,
@@ -362,6 +375,11 @@ impl InsertionRig {
         self.peak_force_n = self.peak_force_n.max(self.plant.truth().force.norm());
     }
 
+    /// The peg's world.
+    pub fn world(&self) -> &PegWorld {
+        &self.plant
+    }
+
     /// The truth of the last step.
     pub fn truth(&self) -> &PegTruth {
         self.plant.truth()
@@ -435,7 +453,8 @@ impl InsertionRig {
     /// Carries on from `s`, taken from a rig built with the same options and seed.
     pub fn restore(&mut self, s: &RigState) {
         self.time_s = s.time_s;
-        self.plant.restore(&s.plant);
+        let resumed = self.plant.restore(&s.plant);
+        debug_assert!(resumed, "a servo's rig is on the built-in plant");
         self.ctl.restore(&s.controller);
         self.estimator.restore(&s.estimator);
         self.estimated = s.estimated;

@@ -181,8 +181,9 @@ impl Scenario {
                 if cfg.world.kind != WorldKind::Builtin {
                     return Err(ConfigError::rule(
                         "world.kind",
-                        "is `mujoco`; the insertion scenario runs on the built-in plant only: \
-                         the wrist is not in MuJoCo's generated model yet (docs/insertion.md)",
+                        "is `mujoco`; the insertion scenario runs on the built-in plant only (a \
+                         restarted servo resumes it; MuJoCo's peg runs in `afs experiment \
+                         insertion --plant mujoco`: docs/insertion-mujoco.md)",
                     )
                     .into());
                 }

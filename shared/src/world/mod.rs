@@ -14,6 +14,8 @@ mod mujoco;
 #[cfg(feature = "mujoco")]
 mod mujoco_box;
 #[cfg(feature = "mujoco")]
+mod mujoco_peg;
+#[cfg(feature = "mujoco")]
 mod mujoco_wrist;
 #[cfg(feature = "mujoco")]
 mod user;
@@ -22,6 +24,8 @@ pub use boxes::BoxWorld;
 pub use mujoco::MujocoWorld;
 #[cfg(feature = "mujoco")]
 pub use mujoco_box::MujocoBox;
+#[cfg(feature = "mujoco")]
+pub use mujoco_peg::MujocoPeg;
 
 use crate::arm::Arm;
 use crate::error::ConfigError;
