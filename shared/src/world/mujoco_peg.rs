@@ -27,9 +27,11 @@ use mujoco_rs::prelude::{MjData, MjModel};
 use std::fmt::Write;
 use std::sync::Arc;
 
-/// Radius of the vertex spheres (m): far above a contact's few µm of penetration, so that a
-/// sphere's centre stays outside the solid it touches and MuJoCo's distance is exact.
-const VERTEX_RADIUS_M: f64 = 5e-5;
+/// Radius of the vertex spheres (m): above a contact's penetration (3 µm at the 15-N force
+/// limit), so that a sphere's centre stays outside the solid it touches and MuJoCo's distance
+/// is exact, and small against the clearance: the part's edges are rounded by it under the
+/// peg's corners (50 µm dropped pegs into a 100-µm clearance: docs/insertion-mujoco.md).
+const VERTEX_RADIUS_M: f64 = 1e-5;
 /// Half the thickness of every geom out of the plane (m).
 const HALF_THICKNESS_M: f64 = 5e-3;
 /// How far the part's solids reach below the hole's bottom (m).
