@@ -195,14 +195,7 @@ impl PegPlant {
     pub fn new(params: PegParams, tip_pose: [f64; 3]) -> Self {
         let (axis, _) = peg_axes(tip_pose[2]);
         let com = Vec2::new(tip_pose[0], tip_pose[1]) + axis * params.com_above_tip_m;
-        // The stiffest contact mode: the corner farthest from the centre of mass.
-        let g = &params.geometry;
-        let reach = (params
-            .com_above_tip_m
-            .max(g.peg_length_m - params.com_above_tip_m))
-        .hypot(0.5 * g.peg_width_m);
-        let inv_mass = 1.0 / params.mass_kg + reach * reach / params.inertia_kg_m2;
-        let omega = (params.contact_stiffness_n_per_m * inv_mass).sqrt();
+        let omega = stiffest_contact_mode(&params);
         let mut p = Self {
             params,
             profile: params.geometry.profile(),
@@ -360,6 +353,16 @@ impl PegPlant {
         let wrenches = (self.last_contact, self.last_wrist);
         truth_at(&self.params, motion, wrenches, found, count, &self.normal_n)
     }
+}
+
+/// The stiffest contact mode's ω (rad/s): a contact at the corner farthest from the centre of
+/// mass, ω = √(k_c (1/m + ρ²/I)).
+pub(crate) fn stiffest_contact_mode(p: &PegParams) -> f64 {
+    let g = &p.geometry;
+    let reach =
+        (p.com_above_tip_m.max(g.peg_length_m - p.com_above_tip_m)).hypot(0.5 * g.peg_width_m);
+    let inv_mass = 1.0 / p.mass_kg + reach * reach / p.inertia_kg_m2;
+    (p.contact_stiffness_n_per_m * inv_mass).sqrt()
 }
 
 /// The tip's pose (x, y, θ) of the peg whose centre of mass and tilt are `q`.

@@ -105,6 +105,22 @@ pub fn direct_solref(stiffness: f64, damping: f64, d: f64, invweight: f64) -> [f
     ]
 }
 
+/// The solver references (normal, friction) of a contact of static stiffness `stiffness`
+/// (N/m) and damping `damping` (N·s/m) with the friction damping and impedance of `m`, on a
+/// body whose `body_invweight0` is `invweight`: the generated box's and peg's contacts.
+pub fn contact_solrefs(
+    stiffness: f64,
+    damping: f64,
+    m: &MujocoParams,
+    invweight: f64,
+) -> [[f64; 2]; 2] {
+    let (d, fd) = (m.impedance, m.friction_damping_n_s_per_m);
+    [
+        direct_solref(stiffness, damping, d, invweight),
+        direct_solref(fd, fd, d, invweight),
+    ]
+}
+
 /// The segments (u₀, h₀, u₁, h₁) of the surface profile over |u| ≤ half length: a plane's one,
 /// a polyline's own (the end ones cut there). A curved profile is one plane too, which the
 /// world keeps tangent to the curve at the point nearest the tool (module docs).

@@ -12,7 +12,7 @@
 //! modelled: MuJoCo has none).
 
 use super::MujocoParams;
-use super::mjcf::direct_solref;
+use super::mjcf::contact_solrefs;
 use super::mujoco::{install_log_handler, load};
 use crate::error::ConfigError;
 use crate::math::{Vec2, cross};
@@ -106,17 +106,12 @@ impl MujocoBox {
         let body = probe
             .name_to_id(mjtObj::mjOBJ_BODY, "box")
             .ok_or_else(|| ConfigError::rule("world (MuJoCo)", "the box model has no box"))?;
-        let w = probe.body_invweight0()[body][0];
-        let (d, fd) = (m.impedance, m.friction_damping_n_s_per_m);
-        let solref = [
-            direct_solref(
-                params.contact_stiffness_n_per_m,
-                params.contact_damping_n_s_per_m,
-                d,
-                w,
-            ),
-            direct_solref(fd, fd, d, w),
-        ];
+        let solref = contact_solrefs(
+            params.contact_stiffness_n_per_m,
+            params.contact_damping_n_s_per_m,
+            m,
+            probe.body_invweight0()[body][0],
+        );
         let model = load(&generate(&params, m, dt, Some(solref)))?;
         let floor = model
             .name_to_id(mjtObj::mjOBJ_GEOM, "floor")

@@ -16,11 +16,13 @@
 //! MuJoCo's pose, with MuJoCo's normal force at each vertex.
 
 use super::MujocoParams;
-use super::mjcf::direct_solref;
+use super::mjcf::contact_solrefs;
 use super::mujoco::{install_log_handler, load};
 use crate::error::ConfigError;
 use crate::insertion::geometry::{Contact, Profile, contacts, peg_axes};
-use crate::insertion::plant::{Flange, PegParams, PegTruth, SLOTS, tip_of, truth_at, wrist_wrench};
+use crate::insertion::plant::{
+    Flange, PegParams, PegTruth, SLOTS, stiffest_contact_mode, tip_of, truth_at, wrist_wrench,
+};
 use crate::math::{Vec2, cross};
 use mujoco_rs::prelude::MjtObjBase as mjtObj;
 use mujoco_rs::prelude::{MjData, MjModel};
@@ -218,29 +220,19 @@ impl MujocoPeg {
             ));
         }
         let g = &params.geometry;
-        let reach = (params
-            .com_above_tip_m
-            .max(g.peg_length_m - params.com_above_tip_m))
-        .hypot(0.5 * g.peg_width_m);
-        let inv_mass = 1.0 / params.mass_kg + reach * reach / params.inertia_kg_m2;
-        let omega = (params.contact_stiffness_n_per_m * inv_mass).sqrt();
+        let omega = stiffest_contact_mode(&params);
         let substeps = (dt * omega / OMEGA_H).ceil().max(1.0) as usize;
         let h = dt / substeps as f64;
         let probe = load(&generate(&params, m, h, None))?;
         let body = probe
             .name_to_id(mjtObj::mjOBJ_BODY, "peg")
             .ok_or_else(|| ConfigError::rule("world (MuJoCo)", "the peg model has no peg"))?;
-        let w = probe.body_invweight0()[body][0];
-        let (d, fd) = (m.impedance, m.friction_damping_n_s_per_m);
-        let solref = [
-            direct_solref(
-                params.contact_stiffness_n_per_m,
-                params.contact_damping_n_s_per_m,
-                d,
-                w,
-            ),
-            direct_solref(fd, fd, d, w),
-        ];
+        let solref = contact_solrefs(
+            params.contact_stiffness_n_per_m,
+            params.contact_damping_n_s_per_m,
+            m,
+            probe.body_invweight0()[body][0],
+        );
         let model = load(&generate(&params, m, h, Some(solref)))?;
         let profile = g.profile();
         let mut slot_of_geom = vec![None; model.ffi().ngeom as usize];
