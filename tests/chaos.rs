@@ -384,6 +384,16 @@ fn a_servo_killed_mid_insertion_resumes_the_arm() {
     std::fs::remove_file(&stack).unwrap();
 }
 
+/// The same on MuJoCo's peg and hole (examples/stack-mujoco.toml's world): the restarted
+/// servo resumes MuJoCo's state of the peg (joints, rates, the solver's warm start), so the
+/// stack still agrees with its MuJoCo lockstep.
+#[cfg(feature = "mujoco")]
+#[test]
+fn a_servo_killed_mid_insertion_resumes_mujocos_peg() {
+    let config = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/stack-mujoco.toml");
+    killed_mid_insertion("pimj", &["--config", config]);
+}
+
 fn killed_mid_insertion(name: &str, extra: &[&str]) {
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let p = prefix(name);

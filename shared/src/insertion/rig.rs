@@ -9,7 +9,7 @@ use super::drive::{ArmDrive, ArmDriveParams, ArmDriveState, Drive};
 use super::estimate::{Estimator, EstimatorState};
 use super::plant::{ContactState, PegParams, PegPlantState, PegTruth};
 use super::whitney::Fit;
-use super::world::PegWorld;
+use super::world::{MUJOCO_PEG_STATE_LEN, PegWorld};
 use crate::error::ConfigError;
 use crate::math::turn;
 use crate::sensor::Wrench;
@@ -204,6 +204,8 @@ pub struct RigState {
     pub peak_force_n: f64,
     /// The arm, when it drives the flange (zero otherwise).
     pub arm: ArmDriveState,
+    /// MuJoCo's state of its peg (None on the built-in plant).
+    pub mujoco: Option<[f64; MUJOCO_PEG_STATE_LEN]>,
 }
 
 /// The plant, the controller and the estimator of one insertion.
@@ -447,14 +449,15 @@ impl InsertionRig {
             prev_tip_y_m: self.prev_tip_y_m,
             peak_force_n: self.peak_force_n,
             arm: self.arm.as_ref().map(ArmDrive::state).unwrap_or_default(),
+            mujoco: self.plant.mujoco_state(),
         }
     }
 
-    /// Carries on from `s`, taken from a rig built with the same options and seed.
-    pub fn restore(&mut self, s: &RigState) {
+    /// Carries on from `s`, taken from a rig built with the same options, seed and world. A
+    /// state of the other world is refused, and nothing is changed.
+    pub fn restore(&mut self, s: &RigState) -> Result<(), ConfigError> {
+        self.plant.restore(&s.plant, s.mujoco.as_ref())?;
         self.time_s = s.time_s;
-        let resumed = self.plant.restore(&s.plant);
-        debug_assert!(resumed, "a servo's rig is on the built-in plant");
         self.ctl.restore(&s.controller);
         self.estimator.restore(&s.estimator);
         self.estimated = s.estimated;
@@ -463,6 +466,7 @@ impl InsertionRig {
         if let Some(arm) = &mut self.arm {
             arm.restore(&s.arm);
         }
+        Ok(())
     }
 }
 

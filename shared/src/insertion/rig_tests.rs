@@ -10,18 +10,41 @@ fn a_restored_rig_carries_on_exactly() {
         (Drive::Arm, PartFrame::Known),
         (Drive::Ideal, PartFrame::Unknown),
     ] {
-        restored_rig_carries_on(&InsertionOptions {
+        let o = InsertionOptions {
             drive,
             part_frame,
             ..InsertionOptions::default()
-        });
+        };
+        restored_rig_carries_on(&o, &WorldConfig::default());
     }
 }
 
-fn restored_rig_carries_on(o: &InsertionOptions) {
+/// The same on MuJoCo's peg, its state taken through the world snapshot's message: MuJoCo's
+/// joints, rates and warm start resume it exactly. A state of the other world is refused.
+#[cfg(feature = "mujoco")]
+#[test]
+fn a_restored_rig_on_mujoco_carries_on_exactly() {
+    use crate::msg::InsertionState;
+    use crate::world::WorldKind;
+    let o = InsertionOptions::default();
+    let mujoco = WorldConfig {
+        kind: WorldKind::Mujoco,
+        ..WorldConfig::default()
+    };
+    restored_rig_carries_on(&o, &mujoco);
+    let on_mujoco = InsertionRig::on_world(&o, 3, &mujoco, 1e-4).unwrap();
+    let mut builtin = InsertionRig::new(&o, 3).unwrap();
+    let wire = RigState::from(&InsertionState::from(&on_mujoco.state()));
+    assert!(wire.mujoco.is_some());
+    assert!(builtin.restore(&wire).is_err());
+    let mut on_mujoco = on_mujoco;
+    assert!(on_mujoco.restore(&builtin.state()).is_err());
+}
+
+fn restored_rig_carries_on(o: &InsertionOptions, world: &WorldConfig) {
     let o = *o;
-    let mut a = InsertionRig::new(&o, 3).unwrap();
     let dt = 1e-4;
+    let mut a = InsertionRig::on_world(&o, 3, world, dt).unwrap();
     let reading = |r: &InsertionRig, k: u32| {
         let mut w = r.sensor_wrench();
         w.force += Vec2::new(0.01, -0.01) * f64::from(k % 7);
@@ -33,8 +56,11 @@ fn restored_rig_carries_on(o: &InsertionOptions) {
         k += 1;
         assert!(a.time_s() < 10.0, "never reached the insert phase");
     }
-    let mut b = InsertionRig::new(&o, 3).unwrap();
-    b.restore(&a.state());
+    let mut b = InsertionRig::on_world(&o, 3, world, dt).unwrap();
+    b.restore(&RigState::from(&crate::msg::InsertionState::from(
+        &a.state(),
+    )))
+    .unwrap();
     for j in 0..2000 {
         let valid = j % 300 > 10;
         let (ra, rb) = (reading(&a, k + j), reading(&b, k + j));
@@ -44,7 +70,7 @@ fn restored_rig_carries_on(o: &InsertionOptions) {
     assert_eq!(a.state(), b.state());
     assert_eq!(a.truth(), b.truth());
     // A fresh rig is elsewhere: the check can tell.
-    let fresh = InsertionRig::new(&o, 3).unwrap();
+    let fresh = InsertionRig::on_world(&o, 3, world, dt).unwrap();
     assert_ne!(fresh.state(), b.state());
 }
 

@@ -6,6 +6,10 @@ use super::plant::{Commanded, Flange, PegParams, PegPlant, PegPlantState, PegTru
 use crate::error::ConfigError;
 use crate::world::{WorldConfig, WorldKind};
 
+/// The length of MuJoCo's peg state (`mj_getState`: time, three joints, their rates, the
+/// solver's warm start of three).
+pub const MUJOCO_PEG_STATE_LEN: usize = 10;
+
 /// The peg's world. The built-in plant stays inline (the servo's fast loop steps it); MuJoCo's
 /// is boxed, being only a handle and its buffers.
 #[derive(Debug, Clone)]
@@ -87,8 +91,8 @@ impl PegWorld {
         }
     }
 
-    /// The built-in plant's whole state (a restarted servo resumes it); MuJoCo's peg runs in
-    /// the lockstep experiment only, never in a servo that restarts: its truth alone.
+    /// The built-in plant's whole state, or on MuJoCo's peg its truth alone with MuJoCo's
+    /// state beside it ([`PegWorld::mujoco_state`]).
     pub fn state(&self) -> PegPlantState {
         match self {
             Self::Builtin(p) => p.state(),
@@ -100,17 +104,37 @@ impl PegWorld {
         }
     }
 
-    /// Carries the built-in plant on from `s`; refused (false) on MuJoCo's peg, whose state
-    /// [`PegWorld::state`] does not hold.
-    #[must_use]
-    pub fn restore(&mut self, s: &PegPlantState) -> bool {
+    /// MuJoCo's state of its peg (None on the built-in plant).
+    pub fn mujoco_state(&self) -> Option<[f64; MUJOCO_PEG_STATE_LEN]> {
         match self {
-            Self::Builtin(p) => {
+            Self::Builtin(_) => None,
+            #[cfg(feature = "mujoco")]
+            Self::Mujoco(p) => Some(p.state()),
+        }
+    }
+
+    /// Carries on from `s` and, on MuJoCo's peg, MuJoCo's state `mujoco` (both taken from a
+    /// world of the same kind and parameters). A state of the other world's kind is refused.
+    pub fn restore(
+        &mut self,
+        s: &PegPlantState,
+        mujoco: Option<&[f64; MUJOCO_PEG_STATE_LEN]>,
+    ) -> Result<(), ConfigError> {
+        match (self, mujoco) {
+            (Self::Builtin(p), None) => {
                 p.restore(s);
-                true
+                Ok(())
             }
             #[cfg(feature = "mujoco")]
-            Self::Mujoco(_) => false,
+            (Self::Mujoco(p), Some(m)) => p.restore(m, &s.truth),
+            (w, _) => Err(ConfigError::rule(
+                "world snapshot",
+                format!(
+                    "holds the insertion on another world than this servo's ({}); restart \
+                     the stack with the set-up the snapshot was taken with",
+                    w.kind().name()
+                ),
+            )),
         }
     }
 }

@@ -318,14 +318,18 @@ wire_struct! {
         pub face: [f64; 14],
         /// 1 once the face's points make a line, 0 before.
         pub face_believed: u32,
-        /// Reserved (0).
-        pub reserved: u32,
+        /// The peg's world: 0 the built-in plant, 1 MuJoCo.
+        pub world: u32,
+        /// MuJoCo's state of its peg as `mj_getState` gives it (time, the three joints, their
+        /// rates, the solver's warm start); zero on the built-in plant.
+        pub mujoco: [f64; MUJOCO_PEG_STATE_LEN],
     }
 }
 
 use crate::insertion::drive::ArmDriveState;
 use crate::insertion::estimate::EstimatorState;
 use crate::insertion::face::FaceState;
+use crate::insertion::world::MUJOCO_PEG_STATE_LEN;
 
 fn face_words(f: &FaceState) -> [f64; 14] {
     let mut w = [0.0; 14];
@@ -404,7 +408,8 @@ impl From<&RigState> for InsertionState {
             arm: [a.q, a.v, a.integral, a.q_d, a.v_d, a.pose_d, a.rate_d],
             face: face_words(&c.face),
             face_believed: u32::from(c.face.believed),
-            reserved: 0,
+            world: u32::from(s.mujoco.is_some()),
+            mujoco: s.mujoco.unwrap_or_default(),
         }
     }
 }
@@ -450,6 +455,7 @@ impl From<&InsertionState> for RigState {
                 pose_d: m.arm[5],
                 rate_d: m.arm[6],
             },
+            mujoco: (m.world == 1).then_some(m.mujoco),
         }
     }
 }

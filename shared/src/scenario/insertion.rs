@@ -26,11 +26,11 @@ pub(super) fn run(
         )
     })?;
     let cfg = &scenario.cfg;
-    let mut rig = InsertionRig::new(&o, cfg.seed)?;
+    let dt = cfg.servo.dt();
+    let mut rig = InsertionRig::on_world(&o, cfg.seed, &cfg.world, dt)?;
     let mut sensor = SensorModel::new(cfg.sensor, cfg.seed);
     let zero = tare(&mut sensor);
     let mut monitor = scenario.monitor();
-    let dt = cfg.servo.dt();
     let limit = (duration_s.min(scenario.natural_duration_s) / dt).round() as u64;
     let (mut reading, mut next_sample, period) = (Wrench::default(), 0.0, 1.0 / cfg.sensor.rate_hz);
     let invalid = replay.force_invalid;

@@ -24,7 +24,6 @@ use crate::setups::on_corner_profile;
 use crate::sim::SimConfig;
 use crate::surface::{Shape, Surface, SurfaceFrame};
 use crate::tuner::{CostTunerParams, TunerConfig};
-use crate::world::WorldKind;
 use serde::Serialize;
 
 /// The scenarios `afs run --scenario` knows.
@@ -178,12 +177,13 @@ impl Scenario {
                 (None, (ID_HOLD_S + t).ceil() + 1.0)
             }
             ScenarioKind::Insertion => {
-                if cfg.world.kind != WorldKind::Builtin {
+                if let Some(path) = &cfg.world.mjcf {
                     return Err(ConfigError::rule(
-                        "world.kind",
-                        "is `mujoco`; the insertion scenario runs on the built-in plant only (a \
-                         restarted servo resumes it; MuJoCo's peg runs in `afs experiment \
-                         insertion --plant mujoco`: docs/insertion-mujoco.md)",
+                        "world.mjcf",
+                        format!(
+                            "is {path}: the insertion runs on afs's generated peg and hole \
+                             (built-in or MuJoCo's), not on a model of your own; leave it out"
+                        ),
                     )
                     .into());
                 }
@@ -438,6 +438,7 @@ mod tests {
     /// arm (examples/mujoco/user-arm.xml).
     #[cfg(feature = "mujoco")]
     fn three_worlds() -> [(&'static str, SimConfig); 3] {
+        use crate::world::WorldKind;
         let mut generated = SimConfig::default();
         generated.world.kind = WorldKind::Mujoco;
         let mut user = generated.clone();

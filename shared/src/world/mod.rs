@@ -12,6 +12,8 @@ pub mod mjcf;
 #[cfg(feature = "mujoco")]
 mod mujoco;
 #[cfg(feature = "mujoco")]
+mod mujoco_body;
+#[cfg(feature = "mujoco")]
 mod mujoco_box;
 #[cfg(feature = "mujoco")]
 mod mujoco_peg;

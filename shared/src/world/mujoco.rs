@@ -4,6 +4,7 @@
 //! forces. Allocation-free per step.
 
 use super::mjcf::{self, names};
+use super::mujoco_body::contacts_on;
 use super::{MUJOCO_STATE_LEN, MujocoState};
 use crate::arm::Arm;
 use crate::error::ConfigError;
@@ -335,31 +336,13 @@ impl MujocoWorld {
     /// Sum of the contact forces on the tool's body (world, N), of their normal parts, the
     /// number of contacts (at most 2 counted) and the deepest penetration (m).
     fn contact_force(&self) -> (Vec2, f64, usize, f64) {
-        let model = self.data.model();
-        let bodies = model.geom_bodyid();
         let mut force = Vec2::zeros();
         let (mut normal, mut count, mut depth) = (0.0, 0, 0.0_f64);
-        for (i, c) in self.data.contact().iter().enumerate() {
-            let b1 = bodies[c.geom1 as usize] as usize;
-            let b2 = bodies[c.geom2 as usize] as usize;
-            let sign = if b1 == self.tool_body {
-                -1.0
-            } else if b2 == self.tool_body {
-                1.0
-            } else {
-                continue;
-            };
-            // The force geom 1 exerts on geom 2, in the contact frame (normal from 1 to 2).
-            let f = self.data.contact_force(i);
-            let fr = &c.frame;
-            let world = Vec2::new(
-                f[0] * fr[0] + f[1] * fr[3] + f[2] * fr[6],
-                f[0] * fr[1] + f[1] * fr[4] + f[2] * fr[7],
-            );
-            force += world * sign;
-            normal += f[0];
+        for c in contacts_on(&self.data, self.tool_body) {
+            force += c.normal + c.friction;
+            normal += c.normal_n;
             count = (count + 1).min(2);
-            depth = depth.max(-c.dist);
+            depth = depth.max(c.depth_m);
         }
         (force, normal, count, depth)
     }

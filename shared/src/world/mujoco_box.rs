@@ -12,8 +12,8 @@
 //! modelled: MuJoCo has none).
 
 use super::MujocoParams;
-use super::mjcf::contact_solrefs;
-use super::mujoco::{install_log_handler, load};
+use super::mujoco::install_log_handler;
+use super::mujoco_body::{contacts_on, with_contact_stiffness};
 use crate::error::ConfigError;
 use crate::math::{Vec2, cross};
 use crate::multicontact::{BoxParams, BoxTruth, Pose};
@@ -102,17 +102,15 @@ impl MujocoBox {
         pose: Pose,
     ) -> Result<Self, ConfigError> {
         install_log_handler();
-        let probe = load(&generate(&params, m, dt, None))?;
-        let body = probe
-            .name_to_id(mjtObj::mjOBJ_BODY, "box")
-            .ok_or_else(|| ConfigError::rule("world (MuJoCo)", "the box model has no box"))?;
-        let solref = contact_solrefs(
-            params.contact_stiffness_n_per_m,
-            params.contact_damping_n_s_per_m,
+        let (model, body) = with_contact_stiffness(
+            |solref| generate(&params, m, dt, solref),
+            "box",
+            (
+                params.contact_stiffness_n_per_m,
+                params.contact_damping_n_s_per_m,
+            ),
             m,
-            probe.body_invweight0()[body][0],
-        );
-        let model = load(&generate(&params, m, dt, Some(solref)))?;
+        )?;
         let floor = model
             .name_to_id(mjtObj::mjOBJ_GEOM, "floor")
             .ok_or_else(|| ConfigError::rule("world (MuJoCo)", "the box model has no floor"))?;
@@ -168,41 +166,24 @@ impl MujocoBox {
 
     /// The contact forces on the box at `pose` (the state the last step started from).
     fn observe(&self, pose: Pose) -> BoxTruth {
-        let model = self.data.model();
-        let bodies = model.geom_bodyid();
         let centre = Vec2::new(pose[0], pose[1]);
         let mut t = BoxTruth {
             pose,
             ..BoxTruth::default()
         };
         let (mut floor_pt, mut wall_pt) = (None, None);
-        for (i, c) in self.data.contact().iter().enumerate() {
-            let sign = if bodies[c.geom1 as usize] as usize == self.body {
-                -1.0
-            } else if bodies[c.geom2 as usize] as usize == self.body {
-                1.0
-            } else {
-                continue;
-            };
-            // The force in the contact frame (normal from geom 1 to geom 2).
-            let f = self.data.contact_force(i);
-            let fr = &c.frame;
-            let row = |k: usize| Vec2::new(fr[3 * k], fr[3 * k + 1]) * sign;
-            let normal = row(0) * f[0];
-            let friction = row(1) * f[1] + row(2) * f[2];
-            let at = Vec2::new(c.pos[0], c.pos[1]);
-            t.force += normal + friction;
-            t.moment += cross(at - centre, normal + friction);
-            t.normal_resultant += normal;
-            t.friction_resultant += friction;
-            if f[0] > 0.0 {
-                let on_floor = c.geom1 as usize == self.floor || c.geom2 as usize == self.floor;
-                if on_floor {
+        for c in contacts_on(&self.data, self.body) {
+            t.force += c.normal + c.friction;
+            t.moment += cross(c.at - centre, c.normal + c.friction);
+            t.normal_resultant += c.normal;
+            t.friction_resultant += c.friction;
+            if c.normal_n > 0.0 {
+                if c.geoms.contains(&self.floor) {
                     t.contacts[0] += 1;
-                    floor_pt = Some(at);
+                    floor_pt = Some(c.at);
                 } else {
                     t.contacts[1] += 1;
-                    wall_pt = Some(at);
+                    wall_pt = Some(c.at);
                 }
             }
         }

@@ -16,14 +16,16 @@
 //! MuJoCo's pose, with MuJoCo's normal force at each vertex.
 
 use super::MujocoParams;
-use super::mjcf::contact_solrefs;
-use super::mujoco::{install_log_handler, load};
+use super::mujoco::install_log_handler;
+use super::mujoco_body::{contacts_on, with_contact_stiffness};
 use crate::error::ConfigError;
 use crate::insertion::geometry::{Contact, Profile, contacts, peg_axes};
 use crate::insertion::plant::{
     Flange, PegParams, PegTruth, SLOTS, stiffest_contact_mode, tip_of, truth_at, wrist_wrench,
 };
+use crate::insertion::world::MUJOCO_PEG_STATE_LEN;
 use crate::math::{Vec2, cross};
+use mujoco_rs::mujoco_c::mjtState;
 use mujoco_rs::prelude::MjtObjBase as mjtObj;
 use mujoco_rs::prelude::{MjData, MjModel};
 use std::fmt::Write;
@@ -40,6 +42,12 @@ const HALF_THICKNESS_M: f64 = 5e-3;
 const BELOW_M: f64 = 5e-3;
 /// The largest ω·h of the stiffest contact mode in a MuJoCo step (the built-in plant's 0.2).
 const OMEGA_H: f64 = 0.2;
+/// What a restarted servo needs to resume the peg exactly (`mj_getState`): time, the three
+/// joints and their rates, and the constraint solver's warm start.
+const STATE_SPEC: u32 = mjtState::mjSTATE_TIME as u32
+    | mjtState::mjSTATE_QPOS as u32
+    | mjtState::mjSTATE_QVEL as u32
+    | mjtState::mjSTATE_WARMSTART as u32;
 
 /// The peg, its wrist and the part, in MuJoCo.
 #[derive(Clone)]
@@ -223,17 +231,15 @@ impl MujocoPeg {
         let omega = stiffest_contact_mode(&params);
         let substeps = (dt * omega / OMEGA_H).ceil().max(1.0) as usize;
         let h = dt / substeps as f64;
-        let probe = load(&generate(&params, m, h, None))?;
-        let body = probe
-            .name_to_id(mjtObj::mjOBJ_BODY, "peg")
-            .ok_or_else(|| ConfigError::rule("world (MuJoCo)", "the peg model has no peg"))?;
-        let solref = contact_solrefs(
-            params.contact_stiffness_n_per_m,
-            params.contact_damping_n_s_per_m,
+        let (model, body) = with_contact_stiffness(
+            |solref| generate(&params, m, h, solref),
+            "peg",
+            (
+                params.contact_stiffness_n_per_m,
+                params.contact_damping_n_s_per_m,
+            ),
             m,
-            probe.body_invweight0()[body][0],
-        );
-        let model = load(&generate(&params, m, h, Some(solref)))?;
+        )?;
         let profile = g.profile();
         let mut slot_of_geom = vec![None; model.ffi().ngeom as usize];
         let names = (0..4)
@@ -317,34 +323,51 @@ impl MujocoPeg {
         self.truth = self.observe(started, wrist);
     }
 
+    /// MuJoCo's state (`mj_getState`: time, joints, rates, warm start).
+    pub fn state(&self) -> [f64; MUJOCO_PEG_STATE_LEN] {
+        let mut values = [0.0; MUJOCO_PEG_STATE_LEN];
+        let len = self.data.read_state_into(STATE_SPEC, &mut values);
+        debug_assert_eq!(len, MUJOCO_PEG_STATE_LEN, "the peg has three joints");
+        values
+    }
+
+    /// Carries on from `state` (taken by [`MujocoPeg::state`] of a peg built alike) with the
+    /// truth `truth` of the step that led there: the next step is the one that peg would have
+    /// taken.
+    pub fn restore(
+        &mut self,
+        state: &[f64; MUJOCO_PEG_STATE_LEN],
+        truth: &PegTruth,
+    ) -> Result<(), ConfigError> {
+        let need = self.data.model().state_size(STATE_SPEC);
+        if need != MUJOCO_PEG_STATE_LEN {
+            return Err(ConfigError::rule(
+                "world snapshot",
+                format!("holds {MUJOCO_PEG_STATE_LEN} MuJoCo state values, this peg needs {need}"),
+            ));
+        }
+        self.data
+            .set_state(state, STATE_SPEC)
+            .map_err(|e| ConfigError::rule("world snapshot", e.to_string()))?;
+        self.data.forward();
+        self.truth = *truth;
+        Ok(())
+    }
+
     /// The truth after a step that started at `started` with the wrist's wrench `wrist`
     /// (force, moment about the centre of mass): MuJoCo's contact forces of that step, the
     /// part's features at the pose it started from.
     fn observe(&self, started: [f64; 3], wrist: (Vec2, f64)) -> PegTruth {
-        let model = self.data.model();
-        let bodies = model.geom_bodyid();
         let q = self.q();
         let com = Vec2::new(started[0], started[1]);
         let (mut force, mut moment) = (Vec2::zeros(), 0.0);
         let mut normal_n = [0.0; SLOTS];
-        for (i, c) in self.data.contact().iter().enumerate() {
-            let (g1, g2) = (c.geom1 as usize, c.geom2 as usize);
-            let sign = if bodies[g1] as usize == self.body {
-                -1.0
-            } else if bodies[g2] as usize == self.body {
-                1.0
-            } else {
-                continue;
-            };
-            // The force in the contact frame (normal from geom 1 to geom 2).
-            let f = self.data.contact_force(i);
-            let fr = &c.frame;
-            let row = |k: usize| Vec2::new(fr[3 * k], fr[3 * k + 1]) * sign;
-            let on_peg = row(0) * f[0] + row(1) * f[1] + row(2) * f[2];
+        for c in contacts_on(&self.data, self.body) {
+            let on_peg = c.normal + c.friction;
             force += on_peg;
-            moment += cross(Vec2::new(c.pos[0], c.pos[1]) - com, on_peg);
-            if let Some(slot) = self.slot_of_geom[g1].or(self.slot_of_geom[g2]) {
-                normal_n[slot] += f[0];
+            moment += cross(c.at - com, on_peg);
+            if let Some(slot) = self.slot_of_geom[c.geoms[0]].or(self.slot_of_geom[c.geoms[1]]) {
+                normal_n[slot] += c.normal_n;
             }
         }
         let mut found = [Contact::default(); SLOTS];

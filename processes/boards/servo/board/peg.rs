@@ -1,5 +1,6 @@
 //! The servo board in the `insertion` scenario: the tick runs the insertion's rig
-//! ([`InsertionRig`]: the peg's plant, the insertion controller, the contact-state estimator)
+//! ([`InsertionRig`]: the peg's world, built-in or MuJoCo's, the insertion controller, the
+//! contact-state estimator)
 //! in place of the arm's servo and world, on the same force input, gate, statistics and
 //! snapshot. The arm's servo and world stay built and idle (their snapshot parts are kept as
 //! they are), so nothing else of the board changes.
@@ -20,9 +21,12 @@ pub(super) fn rig(
     let Some(o) = scenario.insertion else {
         return Ok(None);
     };
-    let mut rig = InsertionRig::new(&o, scenario.cfg.seed).map_err(anyhow::Error::msg)?;
+    let cfg = &scenario.cfg;
+    let mut rig = InsertionRig::on_world(&o, cfg.seed, &cfg.world, cfg.servo.dt())
+        .map_err(anyhow::Error::msg)?;
     if let Some(s) = snapshot.filter(|s| s.insertion.active == 1) {
-        rig.restore(&RigState::from(&s.insertion));
+        rig.restore(&RigState::from(&s.insertion))
+            .map_err(anyhow::Error::msg)?;
     }
     Ok(Some(rig))
 }
