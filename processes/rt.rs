@@ -30,6 +30,34 @@ pub fn next_deadline(deadline: u64, period: u64, now: u64) -> u64 {
     }
 }
 
+/// A chore due every `interval_ns` of the monotonic clock, whatever a loop's rate: a loop that
+/// counted its own ticks would do it ten times less often at 1 kHz than at 10 kHz.
+#[derive(Debug, Clone, Copy)]
+pub struct Every {
+    interval_ns: u64,
+    next_ns: u64,
+}
+
+impl Every {
+    /// First due `interval_ns` after `now_ns`.
+    pub fn new(interval_ns: u64, now_ns: u64) -> Self {
+        Self {
+            interval_ns,
+            next_ns: now_ns + interval_ns,
+        }
+    }
+
+    /// Whether the chore is due at `now_ns`; if so, the next one is `interval_ns` on from now
+    /// (a loop that skips a check does the chore once, not a burst).
+    pub fn due(&mut self, now_ns: u64) -> bool {
+        if now_ns < self.next_ns {
+            return false;
+        }
+        self.next_ns = now_ns + self.interval_ns;
+        true
+    }
+}
+
 /// Sleeps until the monotonic time `deadline_ns` (absolute, so periods do not drift). Returns
 /// at once if the deadline has passed; resumes after signals.
 pub fn sleep_until(deadline_ns: u64) {
@@ -250,5 +278,23 @@ mod tests {
         assert!(monotonic_ns() >= deadline);
         // A deadline in the past returns at once.
         sleep_until(t0);
+    }
+
+    /// A chore every 100 ms is due once per 100 ms of the clock, at any loop rate, and once
+    /// after a long stall.
+    #[test]
+    fn a_chore_is_due_by_the_clock_not_by_ticks() {
+        for period_ns in [100_000u64, 1_000_000, 2_000_000] {
+            let mut every = Every::new(100_000_000, 0);
+            let due = (1..=1_000_000_000 / period_ns)
+                .filter(|k| every.due(k * period_ns))
+                .count();
+            assert_eq!(due, 10, "at a period of {period_ns} ns");
+        }
+        let mut every = Every::new(100_000_000, 0);
+        assert!(!every.due(99_999_999));
+        assert!(every.due(5_000_000_000));
+        assert!(!every.due(5_050_000_000));
+        assert!(every.due(5_100_000_000));
     }
 }

@@ -42,6 +42,7 @@ pub fn run(args: &SensorArgs, stop: &AtomicBool) -> Result<SensorSummary> {
     let mut summary = SensorSummary::default();
     let mut seq = 0u64;
     let mut deadline = rt::monotonic_ns() + period_ns;
+    let mut connections = rt::Every::new(super::CONNECTIONS_EVERY_NS, deadline);
     while !stop.load(Ordering::Relaxed) {
         rt::sleep_until(deadline);
         let now = rt::monotonic_ns();
@@ -96,9 +97,9 @@ pub fn run(args: &SensorArgs, stop: &AtomicBool) -> Result<SensorSummary> {
             }
             seq += 1;
         }
-        if seq % 1024 == 512 {
-            // About every 0.15 s: the start-up report's publisher sends once, so it drops
-            // the connections of subscribers that died only when asked.
+        if connections.due(now) {
+            // The start-up report's publisher sends once, so it drops the connections of
+            // subscribers that died only when asked.
             startup.update_connections();
         }
         deadline = rt::next_deadline(deadline, period_ns, rt::monotonic_ns());

@@ -306,7 +306,7 @@ pub fn run_board(
     super::go_realtime(&mut startup, args);
     let mut summary = SensorSummary::default();
     rx.request_stream();
-    let mut polls = 0u64;
+    let mut connections = rt::Every::new(super::CONNECTIONS_EVERY_NS, rt::monotonic_ns());
     while !stop.load(Ordering::Relaxed) {
         rx.poll(|mut w| {
             if startup.report.input_ns == 0 {
@@ -326,8 +326,7 @@ pub fn run_board(
             copy_counters(&rx, &mut stats.stats, summary.published);
             stats.publish(now);
         }
-        polls += 1;
-        if polls % 1024 == 512 {
+        if connections.due(now) {
             startup.update_connections();
         }
     }

@@ -52,6 +52,8 @@ pub(super) struct ServoBoard {
     tick_limit: u64,
     dt: f64,
     period_ns: u64,
+    /// When to check the connections of ports that send rarely (every 0.1 s).
+    connections: rt::Every,
     /// Why the safe state was last entered (a [`Verdict`] code).
     safe_reason: u32,
     /// A tangent estimate asked for, until the servo can start it: the number of estimations
@@ -61,6 +63,10 @@ pub(super) struct ServoBoard {
     /// The insertion's rig (`insertion` scenario), which the tick runs instead of the arm.
     peg: Option<InsertionRig>,
 }
+
+/// How often the servo drops the connections of a dead estimator and connects a restarted
+/// one (ns): by the clock, so a 1-kHz or 500-Hz servo does it as soon as a 10-kHz one.
+const CONNECTIONS_EVERY_NS: u64 = 100_000_000;
 
 impl ServoBoard {
     /// Opens the ports, resumes the world from the supervisor's blackboard (`--resume`),
@@ -146,6 +152,7 @@ impl ServoBoard {
             tick_limit: (duration / dt).round() as u64,
             dt,
             period_ns,
+            connections: rt::Every::new(CONNECTIONS_EVERY_NS, rt::monotonic_ns()),
             safe_reason: 0,
             estimate_wanted: None,
             last_tare: first.tare(),
@@ -330,7 +337,8 @@ impl ServoBoard {
     }
 
     /// Wake latency, execution time, misses; every 1000 ticks the statistics, and every 0.1 s
-    /// between requests the connections of ports that send rarely.
+    /// between requests (at any rate, and never in the statistics' tick) the connections of
+    /// ports that send rarely.
     fn account(&mut self, now: u64, late: u64) {
         let exec = rt::monotonic_ns().saturating_sub(now);
         hist::record(&mut self.timing.wake, late);
@@ -341,7 +349,7 @@ impl ServoBoard {
         }
         if self.stats.ticks.is_multiple_of(1000) {
             self.publish_stats();
-        } else if self.stats.ticks % 1000 == 500 && self.link.is_idle() {
+        } else if self.link.is_idle() && self.connections.due(now) {
             // Drop the connections of an estimator that died (a file pair per dead server)
             // and connect a restarted one. Without a change this only reads the service's
             // port list; with one it maps or unmaps a segment, as the next send would.
