@@ -38,6 +38,9 @@ pub struct Estimator {
     pub peg_width_m: f64,
     /// Friction coefficient μ (identified).
     pub mu: f64,
+    /// The break-away friction coefficient μ_s (the Stribeck peak over μ; identified): the
+    /// most axial force one wall contact holds per newton of its normal force.
+    pub static_mu: f64,
     /// Contact force below which the peg is free (N).
     pub free_n: f64,
     /// Depth band of the face (m).
@@ -72,6 +75,7 @@ impl Estimator {
             chamfer_depth_m,
             peg_width_m,
             mu,
+            static_mu: mu,
             free_n: 0.2,
             face_band_m: 20e-6,
             two_point_n: 0.05,
@@ -91,6 +95,12 @@ impl Estimator {
     pub fn with_face_turned_up_to(mut self, angle_rad: f64) -> Self {
         let t = angle_rad.abs().min(FRAC_PI_4).tan();
         self.face_slopes = [-t, t];
+        self
+    }
+
+    /// With the break-away friction coefficient `static_mu` (at least μ).
+    pub fn with_static_friction(mut self, static_mu: f64) -> Self {
+        self.static_mu = static_mu.max(self.mu);
         self
     }
 
@@ -162,7 +172,8 @@ impl Estimator {
         // The face's normal is within the frame's error of the robot's y axis, so the force it
         // puts on the peg is within μ (and that error) of it: a force farther out is the
         // chamfer's (45°: (1 − μ)/(1 + μ) sliding down it).
-        let cone = (self.mu.atan() + hi.abs().max(lo.abs()).atan()).tan();
+        let frame_bound = hi.abs().max(lo.abs()).atan();
+        let cone = (self.mu.atan() + frame_bound).tan();
         let on_face_cone = fx.abs() <= cone * fy + self.cone_margin_n;
         if on_face_cone && contact_depth - (lo * x).max(hi * x) < self.face_band_m {
             if fy >= self.narrow_least_n {
@@ -182,7 +193,15 @@ impl Estimator {
             let f2 = -fx + f1;
             f1 > self.two_point_n && f2 > self.two_point_n
         };
-        if pressed(fx, m) || pressed(-fx, -m) {
+        // One contact on a wall (the tip's corner on it, or the hole's edge on the peg's side)
+        // holds along the axis at most μ_s times its normal force, and its normal is within
+        // the frame's bound and the peg's tilt of the x axis: a force farther from the x axis
+        // needs a second contact pressing the other way. Their squeeze is internal to the peg
+        // (a wedge can hold with no lateral force and no moment), so Whitney's balance, which
+        // reads the normal forces from the lateral force and the moment, does not see it.
+        let wall_cone = (self.static_mu.atan() + frame_bound + inp.tip[2].abs()).tan();
+        let squeezed = fy > wall_cone * fx.abs() + self.cone_margin_n;
+        if squeezed || pressed(fx, m) || pressed(-fx, -m) {
             if speed_m_per_s.abs() < self.stopped_m_per_s {
                 return if l < mu * self.peg_width_m {
                     ContactState::Wedged
@@ -368,5 +387,35 @@ mod tests {
         assert_eq!(est().classify(&sliding, 0.0, 0.0), ContactState::Chamfer);
         let straight = corner_at(0.0054, 0.5, 0.1e-3, [0.0, 1.0]);
         assert_eq!(est().classify(&straight, 0.0, 0.0), ContactState::Face);
+    }
+
+    /// In the bore, 0.72 mm past the chamfer (l < μd), square: a peg squeezed between the
+    /// walls holds 1 N along the axis with no lateral force and no moment, which no single
+    /// wall contact can (it would need 1/μ_s N across), so it is two-point, and wedged when
+    /// stopped; Whitney's balance alone reads no normal force and calls it one-point. One
+    /// contact on the left wall at the break-away limit (2 N across, 0.7 N along, the moment
+    /// of the friction at the tip's corner) stays one-point.
+    #[test]
+    fn a_squeeze_the_wrench_cannot_show_is_two_point() {
+        let h = 0.5e-3;
+        let est = || Estimator::new(0.0, h, 0.01, 0.3).with_static_friction(0.35);
+        let tip = [0.0, -(h + 0.72e-3), 0.0];
+        let squeezed = Input {
+            force: [0.0, 1.0],
+            moment_nm: 0.0,
+            tip,
+        };
+        assert_eq!(est().classify(&squeezed, 0.0, 0.0), ContactState::Wedged);
+        assert_eq!(est().classify(&squeezed, 0.0, 0.01), ContactState::TwoPoint);
+        let (normal, r) = (2.0, 0.005);
+        let one = Input {
+            force: [normal, 0.35 * normal],
+            moment_nm: -r * 0.35 * normal,
+            tip,
+        };
+        assert_eq!(est().classify(&one, 0.0, 0.0), ContactState::OnePoint);
+        // Without the break-away friction the same contact is beyond μ's cone.
+        let mut kinetic = Estimator::new(0.0, h, 0.01, 0.3);
+        assert_ne!(kinetic.classify(&one, 0.0, 0.0), ContactState::OnePoint);
     }
 }

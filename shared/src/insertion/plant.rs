@@ -72,6 +72,12 @@ impl PegParams {
     pub fn mu(&self) -> f64 {
         self.friction.kinetic_n / self.reference_normal_force_n
     }
+
+    /// The break-away coefficient μ_s: the kinetic friction and the Stribeck excess at rest
+    /// over the normal force.
+    pub fn static_mu(&self) -> f64 {
+        (self.friction.kinetic_n + self.friction.stribeck_n) / self.reference_normal_force_n
+    }
 }
 
 /// The true contact state (docs/insertion.md, *The plant*).

@@ -311,6 +311,7 @@ impl InsertionRig {
             ),
             // The face's prior is the controller's: 0 with the part's orientation known.
             estimator: Estimator::new(0.0, chamfer_depth, g.peg_width_m, o.mu)
+                .with_static_friction(params.static_mu())
                 .with_face_turned_up_to(ctl_params.face.prior_error_deg.to_radians()),
             estimated: ContactState::Free,
             prev_tip_y_m: start[1],
