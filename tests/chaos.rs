@@ -372,15 +372,20 @@ fn a_servo_killed_mid_insertion_resumes_it() {
     killed_mid_insertion("pin", &SERVO_FAULTS, 10_000, &[]);
 }
 
-/// The same with the three-joint arm carrying the wrist (`[sim.insertion] drive = "arm"`):
-/// the restarted servo resumes the arm too (joints, their servos' integrals, the interpolator).
+/// The same with the three-joint arm carrying the wrist (`[sim.insertion] drive = "arm"`) at
+/// a real robot's 500 Hz, and the estimator killed after the servo's faults: the restarted
+/// servo resumes the arm too (joints, their servos' integrals, the interpolator), and drops
+/// its connections to the dead estimator within the stack's steady footprint (it checks them
+/// by the clock; counted in ticks, every 1000 was every 2 s at 500 Hz and left them).
 #[test]
-fn a_servo_killed_mid_insertion_resumes_the_arm() {
+fn a_servo_killed_mid_insertion_resumes_the_arm_at_500_hz() {
     let stack = std::env::temp_dir().join(format!("afs-stack-arm-{}.toml", std::process::id()));
     let base = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/stack.toml");
-    let text = std::fs::read_to_string(base).unwrap() + "\n[sim.insertion]\ndrive = \"arm\"\n";
+    let text = std::fs::read_to_string(base).unwrap()
+        + "\n[sim.insertion]\ndrive = \"arm\"\n\n[sim.servo]\nrate_hz = 500.0\n";
     std::fs::write(&stack, text).unwrap();
-    killed_mid_insertion("pia", &["--config", stack.to_str().unwrap()]);
+    let faults = ["kill-servo", "freeze-servo", "kill-estimator"];
+    killed_mid_insertion("pia", &faults, 500, &["--config", stack.to_str().unwrap()]);
     std::fs::remove_file(&stack).unwrap();
 }
 
