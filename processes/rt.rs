@@ -30,6 +30,11 @@ pub fn next_deadline(deadline: u64, period: u64, now: u64) -> u64 {
     }
 }
 
+/// How often a board drops the connections of dead peers and connects restarted ones on its
+/// rarely-used ports (ns): by the clock, so a 1-kHz or 500-Hz loop does it as soon as a 10-kHz
+/// one.
+pub const CONNECTIONS_EVERY_NS: u64 = 100_000_000;
+
 /// A chore due every `interval_ns` of the monotonic clock, whatever a loop's rate: a loop that
 /// counted its own ticks would do it ten times less often at 1 kHz than at 10 kHz.
 #[derive(Debug, Clone, Copy)]

@@ -20,10 +20,6 @@ use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::sync::atomic::AtomicBool;
 
-/// How often a sensor board drops the connections of subscribers that died (ns): by the
-/// clock, whatever the sensor's rate.
-const CONNECTIONS_EVERY_NS: u64 = 100_000_000;
-
 /// The wrench publisher every source (and `afs sensor`) publishes on: a slow subscriber loses
 /// its oldest samples, it never blocks the board.
 pub fn wrench_publisher(node: &Node<Svc>) -> Result<Publisher<Svc, WrenchSample, ()>> {

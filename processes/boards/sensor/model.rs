@@ -42,7 +42,7 @@ pub fn run(args: &SensorArgs, stop: &AtomicBool) -> Result<SensorSummary> {
     let mut summary = SensorSummary::default();
     let mut seq = 0u64;
     let mut deadline = rt::monotonic_ns() + period_ns;
-    let mut connections = rt::Every::new(super::CONNECTIONS_EVERY_NS, deadline);
+    let mut connections = rt::Every::new(rt::CONNECTIONS_EVERY_NS, deadline);
     while !stop.load(Ordering::Relaxed) {
         rt::sleep_until(deadline);
         let now = rt::monotonic_ns();

@@ -306,7 +306,7 @@ pub fn run_board(
     super::go_realtime(&mut startup, args);
     let mut summary = SensorSummary::default();
     rx.request_stream();
-    let mut connections = rt::Every::new(super::CONNECTIONS_EVERY_NS, rt::monotonic_ns());
+    let mut connections = rt::Every::new(rt::CONNECTIONS_EVERY_NS, rt::monotonic_ns());
     while !stop.load(Ordering::Relaxed) {
         rx.poll(|mut w| {
             if startup.report.input_ns == 0 {

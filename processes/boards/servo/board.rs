@@ -64,10 +64,6 @@ pub(super) struct ServoBoard {
     peg: Option<InsertionRig>,
 }
 
-/// How often the servo drops the connections of a dead estimator and connects a restarted
-/// one (ns): by the clock, so a 1-kHz or 500-Hz servo does it as soon as a 10-kHz one.
-const CONNECTIONS_EVERY_NS: u64 = 100_000_000;
-
 impl ServoBoard {
     /// Opens the ports, resumes the world from the supervisor's blackboard (`--resume`),
     /// publishes it until the first force sample, builds or resumes the controller, and goes
@@ -152,7 +148,7 @@ impl ServoBoard {
             tick_limit: (duration / dt).round() as u64,
             dt,
             period_ns,
-            connections: rt::Every::new(CONNECTIONS_EVERY_NS, rt::monotonic_ns()),
+            connections: rt::Every::new(rt::CONNECTIONS_EVERY_NS, rt::monotonic_ns()),
             safe_reason: 0,
             estimate_wanted: None,
             last_tare: first.tare(),
