@@ -173,3 +173,55 @@ fn a_tilted_peg_is_aligned_before_it_can_wedge_in_a_tight_fit() {
     );
     assert!(!rig.failed());
 }
+
+/// docs/insertion-mujoco.md, *Measured*: without the dither, the find phase's walk on MuJoCo's
+/// face at seed 1 (the true wrench, no sensor noise) stalls at μ = 0.3: its lead at the tip
+/// is capped at 1.5 μ F_find / k_x, the flange turned past the peg takes part of the pull off,
+/// and F_x/F_y stays under MuJoCo's cone, whose static friction is its kinetic μ. At μ = 0.5
+/// the same walk breaks away and the peg reaches the hole. Prints the figures the page quotes
+/// (`cargo test -p afs-shared --features mujoco --lib no_dither -- --nocapture`).
+#[cfg(feature = "mujoco")]
+#[test]
+fn no_dither_stalls_on_mujocos_face_at_mu_0_3_and_walks_at_0_5() {
+    use crate::world::WorldKind;
+    let mujoco = WorldConfig {
+        kind: WorldKind::Mujoco,
+        ..WorldConfig::default()
+    };
+    let dt = 1e-4;
+    for mu in [0.3, 0.5] {
+        let o = InsertionOptions {
+            mu,
+            method: Method::NoDither,
+            ..InsertionOptions::default()
+        };
+        let mut rig = InsertionRig::on_world(&o, 1, &mujoco, dt).unwrap();
+        while rig.time_s() < 5.0 && rig.phase() != Phase::Align {
+            rig.step(Some(rig.sensor_wrench()), dt);
+        }
+        let w = rig.sensor_wrench();
+        let ratio = w.force.x.abs() / w.force.y;
+        let turn = (rig.target()[2] - rig.truth().pose[2]).to_degrees();
+        println!(
+            "mu {mu}: {:?} at {:.3} s, F_x {:.3} N, F_y {:.3} N, F_x/F_y {ratio:.3}, \
+             flange turned {turn:.3} deg past the peg",
+            rig.phase(),
+            rig.time_s(),
+            w.force.x,
+            w.force.y,
+        );
+        if mu < 0.4 {
+            assert_eq!(
+                rig.phase(),
+                Phase::Find,
+                "the walk did not stall at μ = {mu}"
+            );
+            assert!(
+                ratio < mu && ratio > 0.9 * mu,
+                "F_x/F_y {ratio} at μ = {mu}"
+            );
+        } else {
+            assert_eq!(rig.phase(), Phase::Align, "the walk stalled at μ = {mu}");
+        }
+    }
+}
