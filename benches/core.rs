@@ -13,7 +13,9 @@
 //! `insertion_arm_control_tick` and `insertion_arm_rig_tick` are the same with the three-joint
 //! arm carrying the wrist (`drive = "arm"`): the servo's tick adds the arm's joint servos
 //! (interpolator, inverse kinematics, Jacobian, inverse dynamics, three PIDs), the plant's the
-//! arm's dynamics in every sub-step.
+//! arm's dynamics in every sub-step. Built with `--features mujoco`,
+//! `insertion_mujoco_rig_tick` and `insertion_mujoco_arm_rig_tick` are the rig's tick on
+//! MuJoCo's peg (4 MuJoCo steps a tick), the latter with MuJoCo's arm carrying it (4 more).
 
 use afs_shared::friction::FrictionLaw;
 use afs_shared::insertion::controller::Phase;
@@ -23,6 +25,7 @@ use afs_shared::servo::ServoInput;
 use afs_shared::sim::{Lockstep, SimConfig};
 use afs_shared::tangent::{self, ProbeModel, TangentParams};
 use afs_shared::tuner::{ThesisTunerParams, Tuner, TunerConfig, TunerInput};
+use afs_shared::world::WorldConfig;
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
 use std::time::Duration;
@@ -40,14 +43,14 @@ fn running_sim() -> Lockstep {
     sim
 }
 
-/// An insertion (default fit, seed 1, the flange driven by `drive`) run on noiseless readings
-/// until the peg is 5 mm in.
-fn inserting_rig(drive: Drive) -> InsertionRig {
+/// An insertion (default fit, seed 1, the flange driven by `drive`, in the world `world`)
+/// run on noiseless readings until the peg is 5 mm in.
+fn inserting_rig(drive: Drive, world: &WorldConfig) -> InsertionRig {
     let o = InsertionOptions {
         drive,
         ..InsertionOptions::default()
     };
-    let mut rig = InsertionRig::new(&o, 1).expect("default insertion");
+    let mut rig = InsertionRig::on_world(&o, 1, world, 1e-4).expect("default insertion");
     while !(rig.phase() == Phase::Insert && rig.truth().depth_m > 0.005) {
         rig.step(Some(rig.sensor_wrench()), 1e-4);
         assert!(rig.time_s() < 10.0, "the insertion never got 5 mm in");
@@ -134,7 +137,7 @@ fn benches(c: &mut Criterion) {
     // Each iteration one tick from the same state half-way in (a rig left running would reach
     // the depth and idle there).
     for (drive, name) in [(Drive::Ideal, "insertion"), (Drive::Arm, "insertion_arm")] {
-        let mid = inserting_rig(drive);
+        let mid = inserting_rig(drive, &WorldConfig::default());
         let reading = Some(mid.sensor_wrench());
         c.bench_function(&format!("{name}_control_tick"), |b| {
             b.iter_batched_ref(
@@ -143,6 +146,26 @@ fn benches(c: &mut Criterion) {
                 BatchSize::SmallInput,
             )
         });
+        c.bench_function(&format!("{name}_rig_tick"), |b| {
+            b.iter_batched_ref(
+                || mid.clone(),
+                |r| r.step(black_box(reading), 1e-4),
+                BatchSize::SmallInput,
+            )
+        });
+    }
+
+    #[cfg(feature = "mujoco")]
+    for (drive, name) in [
+        (Drive::Ideal, "insertion_mujoco"),
+        (Drive::Arm, "insertion_mujoco_arm"),
+    ] {
+        let mujoco = WorldConfig {
+            kind: afs_shared::world::WorldKind::Mujoco,
+            ..WorldConfig::default()
+        };
+        let mid = inserting_rig(drive, &mujoco);
+        let reading = Some(mid.sensor_wrench());
         c.bench_function(&format!("{name}_rig_tick"), |b| {
             b.iter_batched_ref(
                 || mid.clone(),

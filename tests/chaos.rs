@@ -399,6 +399,26 @@ fn a_servo_killed_mid_insertion_resumes_mujocos_peg() {
     killed_mid_insertion("pimj", &SERVO_FAULTS, 10_000, &["--config", config]);
 }
 
+/// The same on MuJoCo with the arm carrying the wrist at a real robot's 1 kHz: the
+/// restarted servo resumes MuJoCo's peg and MuJoCo's arm (docs/insertion-mujoco.md, *MuJoCo's
+/// arm*) from the snapshot, and the stack agrees with its MuJoCo lockstep.
+#[cfg(feature = "mujoco")]
+#[test]
+fn a_servo_killed_mid_insertion_resumes_mujocos_arm_at_1_khz() {
+    let stack = std::env::temp_dir().join(format!("afs-stack-mjarm-{}.toml", std::process::id()));
+    let base = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/stack-mujoco.toml");
+    let text = std::fs::read_to_string(base).unwrap()
+        + "\n[sim.insertion]\ndrive = \"arm\"\n\n[sim.servo]\nrate_hz = 1000.0\n";
+    std::fs::write(&stack, text).unwrap();
+    killed_mid_insertion(
+        "pimja",
+        &SERVO_FAULTS,
+        1000,
+        &["--config", stack.to_str().unwrap()],
+    );
+    std::fs::remove_file(&stack).unwrap();
+}
+
 /// The servo's two faults, in turn.
 const SERVO_FAULTS: [&str; 2] = ["kill-servo", "freeze-servo"];
 

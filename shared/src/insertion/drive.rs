@@ -136,6 +136,9 @@ pub struct ArmDrive {
     s: ArmDriveState,
     /// The servo's torques, held over the tick (N·m).
     torque: [f64; 3],
+    /// MuJoCo's dynamics of the arm in place of the closed form's (on MuJoCo's peg).
+    #[cfg(feature = "mujoco")]
+    mujoco: Option<Box<crate::world::MujocoArm>>,
 }
 
 /// The joint-space vector of an array.
@@ -186,7 +189,47 @@ impl ArmDrive {
                 ..ArmDriveState::default()
             },
             torque: [0.0; 3],
+            #[cfg(feature = "mujoco")]
+            mujoco: None,
         })
+    }
+
+    /// The drive in a world whose MuJoCo steps are `mujoco_step_s` seconds long (None: the
+    /// built-in plant, which keeps the closed form). On MuJoCo, MuJoCo's dynamics of the arm
+    /// move it ([`MujocoArm`]), and every [`Flange::react`] must be one such step.
+    ///
+    /// [`MujocoArm`]: crate::world::MujocoArm
+    pub fn in_world(self, mujoco_step_s: Option<f64>) -> Result<Self, ConfigError> {
+        #[cfg(feature = "mujoco")]
+        if let Some(step_s) = mujoco_step_s {
+            let b = self.damping;
+            let mut arm = crate::world::MujocoArm::new(
+                &self.p.arm,
+                &self.p.wrist,
+                [b[0], b[1], b[2]],
+                step_s,
+                self.s.q,
+            )?;
+            arm.set(self.s.q, self.s.v);
+            return Ok(Self {
+                mujoco: Some(Box::new(arm)),
+                ..self
+            });
+        }
+        #[cfg(not(feature = "mujoco"))]
+        if mujoco_step_s.is_some() {
+            return Err(ConfigError::rule(
+                "insertion.drive",
+                "is `arm` on MuJoCo, but this afs was built without MuJoCo",
+            ));
+        }
+        Ok(self)
+    }
+
+    /// Whether MuJoCo moves the arm.
+    #[cfg(feature = "mujoco")]
+    pub fn on_mujoco(&self) -> bool {
+        self.mujoco.is_some()
     }
 
     /// The tool pose in the arm's frame (x, y, φ) for a tip pose in the hole's.
@@ -206,6 +249,10 @@ impl ArmDrive {
     /// Carries on from `s`, taken from a drive with the same parameters.
     pub fn restore(&mut self, s: &ArmDriveState) {
         self.s = *s;
+        #[cfg(feature = "mujoco")]
+        if let Some(arm) = &mut self.mujoco {
+            arm.set(s.q, s.v);
+        }
     }
 
     /// The servo's tick of `dt`: the joint torques that take the tool to the tip pose
@@ -289,6 +336,15 @@ impl Flange for ArmDrive {
     fn react(&mut self, force: Vec2, moment_nm: f64, h: f64) {
         let jp = self.scara.point_jacobian(v3(self.s.q), self.centre_along_m);
         let external = Vector3::from_fn(|i, _| jp[i].dot(&force) + moment_nm);
+        #[cfg(feature = "mujoco")]
+        if let Some(arm) = &mut self.mujoco {
+            debug_assert!(
+                (h - arm.step_s()).abs() <= 1e-9 * h,
+                "{h} s vs MuJoCo's step"
+            );
+            (self.s.q, self.s.v) = arm.step((v3(self.torque) + external).into());
+            return;
+        }
         let acc = self.acceleration(external);
         for k in 0..3 {
             self.s.v[k] += acc[k] * h;

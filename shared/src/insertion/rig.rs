@@ -291,16 +291,21 @@ impl InsertionRig {
         };
         let chamfer_depth = g.chamfer_m / g.chamfer_angle_deg.to_radians().tan().max(1e-9);
         let ctl_params = o.controller_params();
+        let plant = PegWorld::new(params, start, world, dt)?;
         let arm = match o.drive {
             Drive::Ideal => None,
-            Drive::Arm => Some(ArmDrive::new(
-                ArmDriveParams::default(),
-                start,
-                params.compliance_above_tip_m,
-            )?),
+            // On MuJoCo's peg, MuJoCo's arm carries it (docs/insertion-mujoco.md).
+            Drive::Arm => Some(
+                ArmDrive::new(
+                    ArmDriveParams::default(),
+                    start,
+                    params.compliance_above_tip_m,
+                )?
+                .in_world(plant.mujoco_step_s(dt))?,
+            ),
         };
         Ok(Self {
-            plant: PegWorld::new(params, start, world, dt)?,
+            plant,
             arm,
             ctl: Controller::new(
                 ctl_params,

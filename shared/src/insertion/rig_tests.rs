@@ -20,18 +20,31 @@ fn a_restored_rig_carries_on_exactly() {
 }
 
 /// The same on MuJoCo's peg, its state taken through the world snapshot's message: MuJoCo's
-/// joints, rates and warm start resume it exactly. A state of the other world is refused.
+/// joints, rates and warm start resume it exactly, and with the arm MuJoCo's arm (whose joints
+/// and rates the drive's state carries) carries the peg and resumes too. A state of the other
+/// world is refused.
 #[cfg(feature = "mujoco")]
 #[test]
 fn a_restored_rig_on_mujoco_carries_on_exactly() {
     use crate::msg::InsertionState;
     use crate::world::WorldKind;
-    let o = InsertionOptions::default();
     let mujoco = WorldConfig {
         kind: WorldKind::Mujoco,
         ..WorldConfig::default()
     };
-    restored_rig_carries_on(&o, &mujoco);
+    for drive in [Drive::Ideal, Drive::Arm] {
+        let o = InsertionOptions {
+            drive,
+            ..InsertionOptions::default()
+        };
+        restored_rig_carries_on(&o, &mujoco);
+        let rig = InsertionRig::on_world(&o, 3, &mujoco, 1e-4).unwrap();
+        assert_eq!(
+            rig.arm.as_ref().map(ArmDrive::on_mujoco),
+            (drive == Drive::Arm).then_some(true)
+        );
+    }
+    let o = InsertionOptions::default();
     let on_mujoco = InsertionRig::on_world(&o, 3, &mujoco, 1e-4).unwrap();
     let mut builtin = InsertionRig::new(&o, 3).unwrap();
     let wire = RigState::from(&InsertionState::from(&on_mujoco.state()));

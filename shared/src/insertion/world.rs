@@ -68,6 +68,19 @@ impl PegWorld {
         }
     }
 
+    /// The length of one of the world's steps when the servo's period is `dt` (s): MuJoCo
+    /// steps several times a period; None on the built-in plant, which steps itself.
+    pub fn mujoco_step_s(&self, dt: f64) -> Option<f64> {
+        match self {
+            Self::Builtin(_) => {
+                let _ = dt;
+                None
+            }
+            #[cfg(feature = "mujoco")]
+            Self::Mujoco(p) => Some(dt / p.substeps() as f64),
+        }
+    }
+
     /// Truth of the last step.
     pub fn truth(&self) -> &PegTruth {
         match self {

@@ -273,19 +273,27 @@ pub fn generate(cfg: &SimConfig, solref: Option<ContactSolref>) -> String {
 /// The three-joint arm of [`Scara`](crate::insertion::scara::Scara) as MJCF, for checking
 /// MuJoCo's dynamics of it against the closed form (docs/insertion-arm.md): links 1 and
 /// 2 as [`link_bodies`] makes them, the wrist link a third body on a hinge at link 2's end with
-/// its mass at `com_m` and its inertia, the site `tool` at its tool point. No gravity, no
-/// damping, no contact: the insertion's peg and hole are not in MuJoCo yet.
-pub fn scara(arm: &ArmParams, wrist: &crate::insertion::scara::WristParams, dt: f64) -> String {
+/// its mass at `com_m` and its inertia, the site `tool` at its tool point; each joint's
+/// viscous damping `damping_nms_per_rad` (N·m·s/rad). No gravity, no contact: the peg rides in
+/// the wrist's compliance, outside this model ([`MujocoArm`](crate::world::MujocoArm)).
+pub fn scara(
+    arm: &ArmParams,
+    wrist: &crate::insertion::scara::WristParams,
+    damping_nms_per_rad: [f64; 3],
+    dt: f64,
+) -> String {
     let [b1, b2] = link_bodies(arm);
-    let body = |name: &str, pos: f64, b: &BodyInertia| {
+    let body = |(name, pos, b, damping): (&str, f64, &BodyInertia, f64)| {
         let i = b.inertia_kg_m2.max(1e-9);
         format!(
             "<body name=\"{name}\" pos=\"{pos} 0 0\"><joint name=\"{name}\" type=\"hinge\" \
-             axis=\"0 0 1\"/><inertial pos=\"{} 0 0\" mass=\"{}\" diaginertia=\"{i} {i} {i}\"/>",
+             axis=\"0 0 1\" damping=\"{damping:e}\"/><inertial pos=\"{} 0 0\" mass=\"{}\" \
+             diaginertia=\"{i} {i} {i}\"/>",
             b.com_m,
             b.mass_kg.max(1e-9)
         )
     };
+    let [d1, d2, d3] = damping_nms_per_rad;
     let w = BodyInertia {
         mass_kg: wrist.mass_kg,
         com_m: wrist.com_m,
@@ -293,11 +301,11 @@ pub fn scara(arm: &ArmParams, wrist: &crate::insertion::scara::WristParams, dt: 
     };
     format!(
         "<mujoco model=\"afs-scara\">\n  <compiler angle=\"radian\" inertiafromgeom=\"false\"/>\n  \
-         <option timestep=\"{dt:e}\" gravity=\"0 0 0\" integrator=\"Euler\"/>\n  <worldbody>\n    \
+         <option timestep=\"{dt:e}\" gravity=\"0 0 0\" integrator=\"Euler\"><flag contact=\"disable\" constraint=\"disable\"/></option>\n  <worldbody>\n    \
          {}{}{}<site name=\"{}\" pos=\"{} 0 0\"/></body></body></body>\n  </worldbody>\n</mujoco>\n",
-        body("link1", 0.0, &b1),
-        body("link2", arm.link1_length_m, &b2),
-        body("wrist", arm.link2_length_m, &w),
+        body(("link1", 0.0, &b1, d1)),
+        body(("link2", arm.link1_length_m, &b2, d2)),
+        body(("wrist", arm.link2_length_m, &w, d3)),
         names::TOOL_SITE,
         wrist.length_m,
     )

@@ -12,6 +12,8 @@ pub mod mjcf;
 #[cfg(feature = "mujoco")]
 mod mujoco;
 #[cfg(feature = "mujoco")]
+mod mujoco_arm;
+#[cfg(feature = "mujoco")]
 mod mujoco_body;
 #[cfg(feature = "mujoco")]
 mod mujoco_box;
@@ -24,6 +26,8 @@ mod user;
 pub use boxes::BoxWorld;
 #[cfg(feature = "mujoco")]
 pub use mujoco::MujocoWorld;
+#[cfg(feature = "mujoco")]
+pub use mujoco_arm::MujocoArm;
 #[cfg(feature = "mujoco")]
 pub use mujoco_box::MujocoBox;
 #[cfg(feature = "mujoco")]

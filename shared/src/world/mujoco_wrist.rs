@@ -36,7 +36,7 @@ mod tests {
             ..WristParams::default()
         };
         for wrist in [WristParams::default(), flange] {
-            let model = load(&mjcf::scara(&arm, &wrist, 1e-4)).unwrap();
+            let model = load(&mjcf::scara(&arm, &wrist, [0.0; 3], 1e-4)).unwrap();
             assert_eq!(model.ffi().nv, 3);
             let mut data = MjData::new(Arc::new(model));
             let s = Scara::new(arm, wrist);
@@ -63,7 +63,7 @@ mod tests {
         let arm = ArmParams::default();
         let wrist = WristParams::default();
         let dt = 1e-4;
-        let model = load(&mjcf::scara(&arm, &wrist, dt)).unwrap();
+        let model = load(&mjcf::scara(&arm, &wrist, [0.0; 3], dt)).unwrap();
         let mut data = MjData::new(Arc::new(model));
         let s = Scara::new(arm, wrist);
         let (mut q, mut qd) = states()[0];
