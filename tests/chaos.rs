@@ -379,14 +379,9 @@ fn a_servo_killed_mid_insertion_resumes_it() {
 /// by the clock; counted in ticks, every 1000 was every 2 s at 500 Hz and left them).
 #[test]
 fn a_servo_killed_mid_insertion_resumes_the_arm_at_500_hz() {
-    let stack = std::env::temp_dir().join(format!("afs-stack-arm-{}.toml", std::process::id()));
-    let base = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/stack.toml");
-    let text = std::fs::read_to_string(base).unwrap()
-        + "\n[sim.insertion]\ndrive = \"arm\"\n\n[sim.servo]\nrate_hz = 500.0\n";
-    std::fs::write(&stack, text).unwrap();
+    let stack = StackWithArm::new("stack.toml", 500);
     let faults = ["kill-servo", "freeze-servo", "kill-estimator"];
-    killed_mid_insertion("pia", &faults, 500, &["--config", stack.to_str().unwrap()]);
-    std::fs::remove_file(&stack).unwrap();
+    killed_mid_insertion("pia", &faults, 500, &["--config", stack.path()]);
 }
 
 /// The same on MuJoCo's peg and hole (examples/stack-mujoco.toml's world): the restarted
@@ -405,18 +400,38 @@ fn a_servo_killed_mid_insertion_resumes_mujocos_peg() {
 #[cfg(feature = "mujoco")]
 #[test]
 fn a_servo_killed_mid_insertion_resumes_mujocos_arm_at_1_khz() {
-    let stack = std::env::temp_dir().join(format!("afs-stack-mjarm-{}.toml", std::process::id()));
-    let base = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/stack-mujoco.toml");
-    let text = std::fs::read_to_string(base).unwrap()
-        + "\n[sim.insertion]\ndrive = \"arm\"\n\n[sim.servo]\nrate_hz = 1000.0\n";
-    std::fs::write(&stack, text).unwrap();
-    killed_mid_insertion(
-        "pimja",
-        &SERVO_FAULTS,
-        1000,
-        &["--config", stack.to_str().unwrap()],
-    );
-    std::fs::remove_file(&stack).unwrap();
+    let stack = StackWithArm::new("stack-mujoco.toml", 1000);
+    killed_mid_insertion("pimja", &SERVO_FAULTS, 1000, &["--config", stack.path()]);
+}
+
+/// A set-up file of the tests' own: examples/`base` with the arm drive and the servo at
+/// `rate_hz`, removed when dropped (a failed test's too).
+struct StackWithArm(std::path::PathBuf);
+
+impl StackWithArm {
+    fn new(base: &str, rate_hz: u64) -> Self {
+        let name = format!("afs-{rate_hz}-arm-{}-{base}", std::process::id());
+        let path = std::env::temp_dir().join(name);
+        let base = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("examples")
+            .join(base);
+        let text = std::fs::read_to_string(base).unwrap()
+            + &format!(
+                "\n[sim.insertion]\ndrive = \"arm\"\n\n[sim.servo]\nrate_hz = {rate_hz}.0\n"
+            );
+        std::fs::write(&path, text).unwrap();
+        Self(path)
+    }
+
+    fn path(&self) -> &str {
+        self.0.to_str().unwrap()
+    }
+}
+
+impl Drop for StackWithArm {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
 }
 
 /// The servo's two faults, in turn.
