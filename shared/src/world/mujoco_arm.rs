@@ -114,7 +114,8 @@ mod tests {
                 let t = f64::from(n) * h;
                 let tau = Vector3::new(2.0 * (5.0 * t).sin(), -1.0, 0.05 * (9.0 * t).cos());
                 mj.step(tau.into());
-                // MuJoCo's Euler: (M + h D) q̈ = τ − h(q, q̇) − D q̇, then q̇, then q.
+                // MuJoCo's Euler over a step Δt: (M + Δt D) q̈ = τ − h(q, q̇) − D q̇, then q̇,
+                // then q.
                 let qdd = (s.mass_matrix(q) + d * h)
                     .cholesky()
                     .unwrap()
