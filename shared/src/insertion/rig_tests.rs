@@ -27,11 +27,7 @@ fn a_restored_rig_carries_on_exactly() {
 #[test]
 fn a_restored_rig_on_mujoco_carries_on_exactly() {
     use crate::msg::InsertionState;
-    use crate::world::WorldKind;
-    let mujoco = WorldConfig {
-        kind: WorldKind::Mujoco,
-        ..WorldConfig::default()
-    };
+    let mujoco = mujoco_world();
     for drive in [Drive::Ideal, Drive::Arm] {
         let o = InsertionOptions {
             drive,
@@ -52,6 +48,15 @@ fn a_restored_rig_on_mujoco_carries_on_exactly() {
     assert!(builtin.restore(&wire).is_err());
     let mut on_mujoco = on_mujoco;
     assert!(on_mujoco.restore(&builtin.state()).is_err());
+}
+
+/// MuJoCo's world of the insertion, on its defaults.
+#[cfg(feature = "mujoco")]
+fn mujoco_world() -> WorldConfig {
+    WorldConfig {
+        kind: crate::world::WorldKind::Mujoco,
+        ..WorldConfig::default()
+    }
 }
 
 fn restored_rig_carries_on(o: &InsertionOptions, world: &WorldConfig) {
@@ -196,11 +201,7 @@ fn a_tilted_peg_is_aligned_before_it_can_wedge_in_a_tight_fit() {
 #[cfg(feature = "mujoco")]
 #[test]
 fn no_dither_stalls_on_mujocos_face_at_mu_0_3_and_walks_at_0_5() {
-    use crate::world::WorldKind;
-    let mujoco = WorldConfig {
-        kind: WorldKind::Mujoco,
-        ..WorldConfig::default()
-    };
+    let mujoco = mujoco_world();
     let dt = 1e-4;
     for mu in [0.3, 0.5] {
         let o = InsertionOptions {

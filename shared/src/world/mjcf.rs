@@ -301,7 +301,8 @@ pub fn scara(
     };
     format!(
         "<mujoco model=\"afs-scara\">\n  <compiler angle=\"radian\" inertiafromgeom=\"false\"/>\n  \
-         <option timestep=\"{dt:e}\" gravity=\"0 0 0\" integrator=\"Euler\"><flag contact=\"disable\" constraint=\"disable\"/></option>\n  <worldbody>\n    \
+         <option timestep=\"{dt:e}\" gravity=\"0 0 0\" integrator=\"Euler\">\
+         <flag contact=\"disable\" constraint=\"disable\"/></option>\n  <worldbody>\n    \
          {}{}{}<site name=\"{}\" pos=\"{} 0 0\"/></body></body></body>\n  </worldbody>\n</mujoco>\n",
         body(("link1", 0.0, &b1, d1)),
         body(("link2", arm.link1_length_m, &b2, d2)),

@@ -92,6 +92,18 @@ pub(super) fn install_log_handler() {
     });
 }
 
+/// `seconds` as a MuJoCo model's step or period (`what`), refused unless a positive time.
+pub(super) fn positive_time(what: &str, seconds: f64) -> Result<(), ConfigError> {
+    if seconds.is_finite() && seconds > 0.0 {
+        Ok(())
+    } else {
+        Err(ConfigError::rule(
+            what,
+            format!("is {seconds} s; give a positive time"),
+        ))
+    }
+}
+
 pub(super) fn load(xml: &str) -> Result<MjModel, ConfigError> {
     MjModel::from_xml_string(xml)
         .map_err(|e| ConfigError::rule("world (MuJoCo)", format!("the model did not load: {e}")))

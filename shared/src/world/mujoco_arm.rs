@@ -11,7 +11,7 @@
 //! constraint to warm-start), which the drive's snapshot already carries.
 
 use super::mjcf;
-use super::mujoco::{install_log_handler, load};
+use super::mujoco::{install_log_handler, load, positive_time};
 use crate::arm::ArmParams;
 use crate::error::ConfigError;
 use crate::insertion::scara::WristParams;
@@ -36,28 +36,21 @@ impl std::fmt::Debug for MujocoArm {
 
 impl MujocoArm {
     /// Links 1 and 2 of `arm` and the wrist link `wrist`, each joint damped by
-    /// `damping_nms_per_rad`, stepped `step_s` seconds at a time, at rest at joints `q`.
+    /// `damping_nms_per_rad`, stepped `step_s` seconds at a time; its joints at zero until
+    /// [`MujocoArm::set`].
     pub fn new(
         arm: &ArmParams,
         wrist: &WristParams,
         damping_nms_per_rad: [f64; 3],
         step_s: f64,
-        q: [f64; 3],
     ) -> Result<Self, ConfigError> {
         install_log_handler();
-        if !(step_s.is_finite() && step_s > 0.0) {
-            return Err(ConfigError::rule(
-                "MuJoCo arm's step",
-                format!("is {step_s} s; give a positive step"),
-            ));
-        }
+        positive_time("MuJoCo arm's step", step_s)?;
         let model = load(&mjcf::scara(arm, wrist, damping_nms_per_rad, step_s))?;
-        let mut a = Self {
+        Ok(Self {
             data: MjData::new(Arc::new(model)),
             step_s,
-        };
-        a.set(q, [0.0; 3]);
-        Ok(a)
+        })
     }
 
     /// The length of one step (s).
@@ -80,13 +73,6 @@ impl MujocoArm {
         let (q, v) = (self.data.qpos(), self.data.qvel());
         ([q[0], q[1], q[2]], [v[0], v[1], v[2]])
     }
-
-    /// MuJoCo's tool site (m) where the last step began (at the joints of the last
-    /// [`MujocoArm::set`] after it).
-    pub fn tool_site(&self) -> [f64; 2] {
-        let p = self.data.site_xpos()[0];
-        [p[0], p[1]]
-    }
 }
 
 #[cfg(test)]
@@ -107,8 +93,9 @@ mod tests {
         let h = 1e-4;
         let s = Scara::new(arm, wrist);
         let run = |model_damping: [f64; 3]| {
-            let mut mj = MujocoArm::new(&arm, &wrist, model_damping, h, [0.3, 1.1, -0.7]).unwrap();
+            let mut mj = MujocoArm::new(&arm, &wrist, model_damping, h).unwrap();
             let (mut q, mut qd) = (Vector3::new(0.3, 1.1, -0.7), Vector3::zeros());
+            mj.set(q.into(), [0.0; 3]);
             let d = nalgebra::Matrix3::from_diagonal(&Vector3::from(damping));
             for n in 0..2000 {
                 let t = f64::from(n) * h;
@@ -127,7 +114,7 @@ mod tests {
             let rate: [f64; 3] = std::array::from_fn(|k| mj.data.qvel()[k]);
             // A step leaves the site where the step began; the kinematics at the end.
             mj.set(end.into(), rate);
-            let (site, tool) = (mj.tool_site(), s.forward(end));
+            let (site, tool) = (mj.data.site_xpos()[0], s.forward(end));
             assert!((site[0] - tool[0]).hypot(site[1] - tool[1]) < 1e-12);
             (Vector3::from_column_slice(mj.data.qpos()) - q).norm()
         };
@@ -142,7 +129,7 @@ mod tests {
     fn a_bad_step_is_refused() {
         let (arm, wrist) = (ArmParams::default(), WristParams::default());
         for h in [0.0, -1e-4, f64::NAN] {
-            assert!(MujocoArm::new(&arm, &wrist, [0.0; 3], h, [0.0, 1.0, 0.0]).is_err());
+            assert!(MujocoArm::new(&arm, &wrist, [0.0; 3], h).is_err());
         }
     }
 }

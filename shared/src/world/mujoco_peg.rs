@@ -16,7 +16,7 @@
 //! MuJoCo's pose, with MuJoCo's normal force at each vertex.
 
 use super::MujocoParams;
-use super::mujoco::install_log_handler;
+use super::mujoco::{install_log_handler, positive_time};
 use super::mujoco_body::{contacts_on, with_contact_stiffness};
 use crate::error::ConfigError;
 use crate::insertion::geometry::{Contact, Profile, contacts, peg_axes};
@@ -221,12 +221,7 @@ impl MujocoPeg {
         dt: f64,
     ) -> Result<Self, ConfigError> {
         install_log_handler();
-        if !(dt.is_finite() && dt > 0.0) {
-            return Err(ConfigError::rule(
-                "servo period (MuJoCo peg)",
-                format!("is {dt} s; give a positive period"),
-            ));
-        }
+        positive_time("servo period (MuJoCo peg)", dt)?;
         let g = &params.geometry;
         let omega = stiffest_contact_mode(&params);
         let substeps = (dt * omega / OMEGA_H).ceil().max(1.0) as usize;
