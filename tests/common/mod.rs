@@ -42,6 +42,15 @@ pub fn bin(name: &str) -> PathBuf {
     p
 }
 
+/// One line on the test's stderr that the harness does not capture (`writeln!` to stderr is
+/// not `eprintln!`): shown by `cargo test`, and by nextest for the tests that
+/// .config/nextest.toml names. For what a test could not use here and says instead of failing
+/// (namespaces, SCHED_FIFO, mlockall).
+pub fn say(line: &str) {
+    use std::io::Write;
+    let _ = writeln!(std::io::stderr(), "{line}");
+}
+
 /// A prefix no other test or run uses.
 pub fn prefix(tag: &str) -> String {
     format!("t{}{tag}", std::process::id())

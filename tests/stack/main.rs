@@ -58,6 +58,23 @@ fn surface_tracking_across_processes_agrees_with_the_lockstep() {
     assert_eq!(r.samples.plant_lost, 0);
     assert_eq!(r.samples.reordered, 0);
     let l = r.loop_stats.expect("the servo's loop statistics");
+    // SCHED_FIFO, mlockall and pinning where permitted; where refused (not root) the run still
+    // passes, and the servo said why.
+    let err = String::from_utf8_lossy(&out.stderr);
+    for (granted, refusal) in [
+        (l.sched_fifo, "afs-servo: warning: SCHED_FIFO"),
+        (l.mlocked, "afs-servo: warning: mlockall"),
+        (l.pinned, "afs-servo: warning: pinning"),
+    ] {
+        assert!(granted || err.contains(refusal), "no '{refusal}' in: {err}");
+    }
+    let yes = |on: bool| if on { "granted" } else { "refused, said why" };
+    say(&format!(
+        "the servo's real-time set-up: SCHED_FIFO {}, mlockall {}, pinning {}",
+        yes(l.sched_fifo),
+        yes(l.mlocked),
+        yes(l.pinned)
+    ));
     let w = l.wake_jitter_us;
     for q in [w.p50, w.p99, w.p99_9, w.max] {
         assert!(q.is_finite() && q >= 0.0, "wake jitter {w:?}");
