@@ -6,8 +6,13 @@
 # estimator, its own link board, and an observer that records the stack (`afs record`). The
 # scenario runs; one JSON summary is printed on stdout.
 #
-#   sudo examples/two-hosts.sh [--scenario surface-tracking] [--duration 30] [--seed 1]
+#   examples/two-hosts.sh [--scenario surface-tracking] [--duration 30] [--seed 1]
 #        [--prefix P] [--bin target/release] [--chaos KINDS [--faults N] [--cut-for S]] [--keep]
+#
+# As root, host A is this machine's own network. As any other user the script runs itself in a
+# user namespace of its own (`unshare --user --map-root-user --net --mount`), where host A is a
+# network namespace too; where the kernel refuses that, it prints {"skipped": "<why>"} and exits
+# 77, the exit status of a skipped test.
 #
 # --chaos runs `afs chaos` on host A instead of `afs run`, with the fault kinds given
 # (comma-separated, taken in turn, N faults: one of each by default), e.g. kill-link,cut-link:
@@ -30,6 +35,9 @@ faults=""
 cut_for=5
 keep=0
 die() { echo "two-hosts: error: $*" >&2; exit 2; }
+args=("$@")
+# ip may live in an sbin folder that a user's PATH leaves out.
+PATH="$PATH:/usr/sbin:/sbin"
 while [ $# -gt 0 ]; do
     case "$1" in
         --scenario) scenario="$2"; shift 2 ;;
@@ -41,22 +49,38 @@ while [ $# -gt 0 ]; do
         --faults) faults="$2"; shift 2 ;;
         --cut-for) cut_for="$2"; shift 2 ;;
         --keep) keep=1; shift ;;
-        -h|--help) sed -n '2,21p' "$0"; exit 0 ;;
+        -h|--help) sed -n '2,26p' "$0"; exit 0 ;;
         *) die "unknown option '$1' (see --help)" ;;
     esac
 done
-[ "$(id -u)" -eq 0 ] || die "run as root: host B is a network and mount namespace"
+# Not root: the same script again inside a user namespace, where it is root over namespaces it
+# made itself; host A's network is then a namespace too.
+namespace=root
+if [ "$(id -u)" -ne 0 ]; then
+    why=$(unshare --user --map-root-user --net --mount true 2>&1) || {
+        why=${why//\"/\'}
+        printf '{"skipped": "host B needs namespaces: as user %s, unshare --user --map-root-user --net --mount failed: %s"}\n' \
+            "$(id -un)" "$(echo "$why" | tr '\n' ' ')"
+        exit 77
+    }
+    exec unshare --user --map-root-user --net --mount --propagation private \
+        env AFS_TWO_HOSTS_USER_NAMESPACE=1 "$0" "${args[@]}"
+fi
+if [ "${AFS_TWO_HOSTS_USER_NAMESPACE:-0}" = 1 ]; then
+    namespace=user
+    ip link set lo up
+fi
+bin="$(cd "$bin" 2>/dev/null && pwd)" || die "no folder of binaries at '$bin'"
 for b in afs afs-servo afs-sensor afs-estimator afs-link; do
     [ -x "$bin/$b" ] || die "$bin/$b is missing: build with \`cargo build --release --workspace\`"
 done
-for t in ip unshare nsenter python3; do
+for t in ip unshare nsenter chrt python3; do
     command -v "$t" >/dev/null || die "'$t' is needed"
 done
 if [ -z "$faults" ] && [ -n "$chaos" ]; then faults=$(echo "$chaos" | tr ',' '\n' | grep -c .); fi
 
 work="$(mktemp -d /tmp/afs-two-hosts.XXXXXX)"
 tag="$(printf '%05d' $(($$ % 100000)))"
-ns="afs-b-$tag"
 veth_a="afsa$tag"
 veth_b="afsb$tag"
 # A /30 of 10.250.0.0/16 per run, from the pid.
@@ -74,31 +98,36 @@ cleanup() {
     for p in "${pids[@]}"; do kill -KILL "$p" 2>/dev/null; done
     [ -n "$hold" ] && kill -KILL "$hold" 2>/dev/null
     ip link del "$veth_a" 2>/dev/null
-    ip netns del "$ns" 2>/dev/null
     if [ "$keep" -eq 0 ]; then rm -rf "$work"; else echo "two-hosts: files kept in $work" >&2; fi
 }
 trap cleanup EXIT
 trap 'exit 2' INT TERM
 
-# The link: a veth pair, host A's end here, host B's in its namespace.
-ip netns add "$ns"
-ip link add "$veth_a" type veth peer name "$veth_b" netns "$ns"
-ip addr add "$a_ip/30" dev "$veth_a"
-ip link set "$veth_a" up
-ip -n "$ns" addr add "$b_ip/30" dev "$veth_b"
-ip -n "$ns" link set "$veth_b" up
-ip -n "$ns" link set lo up
-
-# Host B: a process holding its namespaces, with empty tmpfs on /dev/shm and the iceoryx2 root.
-ip netns exec "$ns" unshare --mount --propagation private sh -c \
-    'mount -t tmpfs afs-b-shm /dev/shm && mkdir -p /tmp/iceoryx2 && mount -t tmpfs afs-b-iox2 /tmp/iceoryx2 && echo ready > "$0" && exec sleep 100000' \
-    "$work/b.ready" &
+# Host B: a process holding a network namespace and a mount namespace of its own, with empty
+# tmpfs on /dev/shm and the iceoryx2 root. (No `ip netns`: it needs /run/netns, which a user
+# namespace cannot write.)
+# The iceoryx2 root is this user's (processes/ipc/mod.rs, `root_path`): afs names it.
+iox_root=$("$bin/afs" iox2-config --prefix "$prefix" | sed -n 's/^root-path = "\(.*\)"$/\1/p')
+[ -n "$iox_root" ] || die "afs iox2-config named no iceoryx2 root"
+unshare --net --mount --propagation private sh -c \
+    'mount -t tmpfs afs-b-shm /dev/shm && mkdir -p "$1" && mount -t tmpfs afs-b-iox2 "$1" && echo ready > "$0" && exec sleep 100000' \
+    "$work/b.ready" "$iox_root" &
 hold=$!
 disown "$hold"
 for _ in $(seq 100); do [ -s "$work/b.ready" ] && break; sleep 0.05; done
 [ -s "$work/b.ready" ] || die "host B's namespace did not come up"
-# Runs a command on host B, in place of the calling (sub)shell, so that `$!` is its pid.
-on_b() { exec nsenter -t "$hold" -m -n -- "$@"; }
+# Runs a command on host B, in place of the calling (sub)shell, so that `$!` is its pid. Host B
+# stands for another machine but shares this one's CPUs: its processes run at SCHED_IDLE, so
+# that where SCHED_FIFO is refused (not root) host A's servo and sensor still come first.
+on_b() { exec nsenter -t "$hold" -m -n -- chrt --idle 0 "$@"; }
+
+# The link: a veth pair, host A's end here, host B's in its namespace.
+ip link add "$veth_a" type veth peer name "$veth_b" netns "$hold"
+ip addr add "$a_ip/30" dev "$veth_a"
+ip link set "$veth_a" up
+nsenter -t "$hold" -n ip addr add "$b_ip/30" dev "$veth_b"
+nsenter -t "$hold" -n ip link set "$veth_b" up
+nsenter -t "$hold" -n ip link set lo up
 
 # Host B's boards and observer.
 # (Stopped in this order at the end: the link board last, as it leaves the prefix clean.)
@@ -156,11 +185,11 @@ for p in "${pids[@]}"; do
 done
 pids=()
 # What the stack's processes left on host B (nothing, when they stop cleanly).
-leftover=$(on_b sh -c 'find /dev/shm /tmp/iceoryx2 -name "afs_*" 2>/dev/null | tr "\n" " "' || true)
+leftover=$(on_b sh -c 'find /dev/shm "$0" -name "afs_*" 2>/dev/null | tr "\n" " "' "$iox_root" || true)
 
-python3 - "$work" "$run_status" "$leftover" "$chaos" "$cut_for" <<'EOF'
+python3 - "$work" "$run_status" "$leftover" "$chaos" "$cut_for" "$namespace" <<'EOF'
 import json, sys, os
-work, run_status, leftover, chaos, cut_for = sys.argv[1:6]
+work, run_status, leftover, chaos, cut_for, namespace = sys.argv[1:7]
 def load(name):
     try:
         with open(os.path.join(work, name)) as f:
@@ -174,6 +203,8 @@ servo = rec.get("servo", {})
 faults = (a.get("chaos") or {}).get("faults", [])
 out = {
     "passed": False,
+    # "root": host A is this machine's network; "user": the run was in a user namespace.
+    "namespace": namespace,
     "run": {
         "exit_status": int(run_status),
         "passed": a.get("passed"),

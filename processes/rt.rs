@@ -129,7 +129,7 @@ pub fn setup(priority: u8, lock_memory: bool, cpu: Option<usize>) -> RtReport {
         let n = available_cpus();
         if cpu >= n {
             r.warnings.push(format!(
-                "CPU {cpu} does not exist here ({n} CPUs); not pinning"
+                "pinning to CPU {cpu} skipped: it does not exist here ({n} CPUs)"
             ));
         } else {
             // SAFETY: cpu_set_t is plain data; CPU_SET indexes within its size (cpu < n).
@@ -157,13 +157,78 @@ pub fn setup(priority: u8, lock_memory: bool, cpu: Option<usize>) -> RtReport {
         if rc == 0 {
             r.fifo = true;
         } else {
+            let err = io::Error::last_os_error();
+            // The normal scheduler rounds a sleep's end up by the thread's timer slack (50 µs
+            // by default), half a 10-kHz period; any user may shrink it to 1 ns.
+            // SAFETY: plain prctl on this thread with an integer argument.
+            let slack = unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1 as libc::c_ulong) } == 0;
             r.warnings.push(format!(
-                "SCHED_FIFO priority {priority} refused ({}); running at normal priority (needs CAP_SYS_NICE or root)",
-                io::Error::last_os_error()
+                "SCHED_FIFO priority {priority} refused ({err}); running at normal priority{} (needs CAP_SYS_NICE or root)",
+                if slack {
+                    " with a timer slack of 1 ns"
+                } else {
+                    ""
+                }
             ));
         }
     }
     r
+}
+
+/// Where this user may not run at SCHED_FIFO, moves the calling thread (and the threads it
+/// starts from then on) to SCHED_IDLE and says so: the servo and the sensor, refused SCHED_FIFO
+/// too, then run at normal priority beside it, and the scheduler hands the CPU to a waking
+/// normal thread at once when an idle-class one holds it (at nice 10 it did not: with host B's
+/// link board, recorder and estimator at nice 10 the servo's wake p99 was still 1.7 ms). The
+/// boards that are not real-time (the estimator, the link board) call it at start; they get
+/// every CPU cycle the real-time boards leave. None where SCHED_FIFO is permitted: the
+/// real-time boards then outrank everything at normal priority anyway.
+pub fn make_way_for_realtime() -> Option<String> {
+    if fifo_permitted() {
+        return None;
+    }
+    let param = libc::sched_param { sched_priority: 0 };
+    // SAFETY: plain syscall on the calling thread (tid 0) with a valid sched_param.
+    let rc = unsafe { libc::sched_setscheduler(0, libc::SCHED_IDLE, &param) };
+    Some(if rc == 0 {
+        "SCHED_FIFO is refused here, so the real-time boards run at normal priority: this \
+         process runs at SCHED_IDLE to leave them the CPU"
+            .into()
+    } else {
+        format!(
+            "SCHED_FIFO is refused here and SCHED_IDLE too ({}); this process competes with \
+             the real-time boards",
+            io::Error::last_os_error()
+        )
+    })
+}
+
+/// Gives the CPU to the threads of the same class waiting for it (sched_yield), for a board
+/// at normal priority that woke late.
+pub fn let_peers_run() {
+    // SAFETY: plain syscall without arguments.
+    unsafe {
+        libc::sched_yield();
+    }
+}
+
+/// Whether this user may run a thread at SCHED_FIFO: tried on a thread of its own, which ends
+/// at once.
+pub fn fifo_permitted() -> bool {
+    std::thread::spawn(|| {
+        let param = libc::sched_param { sched_priority: 1 };
+        // SAFETY: plain syscall on the calling thread (tid 0) with a valid sched_param.
+        unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) == 0 }
+    })
+    .join()
+    .unwrap_or(false)
+}
+
+/// Pins the calling thread to `cpu` when it exists, a warning on stderr from `who` otherwise.
+pub fn pin_thread(cpu: usize, who: &str) {
+    for w in setup(0, false, Some(cpu)).warnings {
+        eprintln!("{who}: warning: {w}");
+    }
 }
 
 /// Number of CPUs online (not this thread's affinity mask: a process pinned to one CPU may

@@ -3,6 +3,7 @@ publish-subscribe services, waiting while the stack (or the link to it) is start
 clearly when the stack's message layout is not the client's (docs/messages.md, *Versions*)."""
 
 import ctypes
+import os
 import re
 import sys
 import time
@@ -14,6 +15,32 @@ def layout_version(type_name):
     """The layout version an afs type name carries: `afs::Name.vN` is N, `afs::Name` is 1."""
     m = re.search(r"\.v(\d+)$", type_name)
     return int(m.group(1)) if m else 1
+
+
+def root_path():
+    """The iceoryx2 root folder of this user's stacks, by afs's rule (processes/ipc/mod.rs,
+    `root_path`): `/tmp/iceoryx2/` for root, `/tmp/iceoryx2-<uid>/` for any other user, the
+    user being the machine's (inside a user namespace, root is the user who made it)."""
+    uid = os.getuid()
+    try:
+        with open("/proc/self/uid_map", encoding="ascii") as f:
+            for line in f:
+                fields = [int(x) for x in line.split()]
+                if len(fields) == 3 and fields[0] <= uid < fields[0] + fields[2]:
+                    uid = fields[1] + uid - fields[0]
+                    break
+    except (OSError, ValueError):
+        pass
+    return "/tmp/iceoryx2/" if uid == 0 else f"/tmp/iceoryx2-{uid}/"
+
+
+def stack_config(prefix):
+    """The iceoryx2 config of stack ``prefix``: its file-name prefix (docs/messages.md) under
+    this user's root folder."""
+    config = iox2.config.global_config()
+    config.global_cfg.prefix = iox2.FileName.new(f"afs_{prefix}_")
+    config.global_cfg.root_path = iox2.Path.new(root_path())
+    return config
 
 
 def service_payload(config, service_name):
@@ -43,9 +70,7 @@ def subscribe(prefix, service_name, payload_type, deadline, buffer_size=None, no
     stderr. ``node_name`` names the node (what `afs run` reports of a client still attached
     when the stack ends)."""
     iox2.set_log_level_from_env_or(iox2.LogLevel.Warn)
-    config = iox2.config.global_config()
-    # The stack isolates its shared memory with this file-name prefix (docs/messages.md).
-    config.global_cfg.prefix = iox2.FileName.new(f"afs_{prefix}_")
+    config = stack_config(prefix)
     builder = iox2.NodeBuilder.new().config(config)
     if node_name is not None:
         builder = builder.name(iox2.NodeName.new(node_name))

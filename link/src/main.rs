@@ -168,6 +168,11 @@ fn run(cli: &Cli) -> Result<Summary> {
     for w in &r.warnings {
         eprintln!("afs-link: warning: {w}");
     }
+    if cli.common.priority == 0
+        && let Some(n) = afs::rt::make_way_for_realtime()
+    {
+        eprintln!("afs-link: note: {n}");
+    }
     let stop = stop_flag()?;
     let zenoh = zenoh_config(cli)?;
     let allow: Vec<String> = if cli.allow.is_empty() {

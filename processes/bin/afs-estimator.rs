@@ -26,6 +26,11 @@ fn main() -> ExitCode {
         for w in &r.warnings {
             eprintln!("afs-estimator: warning: {w}");
         }
+        if cli.common.priority == 0
+            && let Some(n) = afs::rt::make_way_for_realtime()
+        {
+            eprintln!("afs-estimator: note: {n}");
+        }
         let stop = stop_flag()?;
         afs::boards::estimator::run(&cli.common.prefix, startup, &stop)
     })();

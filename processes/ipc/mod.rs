@@ -47,13 +47,56 @@ pub fn file_prefix(prefix: &str) -> String {
     format!("afs_{prefix}_")
 }
 
-/// The iceoryx2 config of stack `prefix`.
+/// The iceoryx2 config of stack `prefix`: its file prefix, under this user's root folder
+/// ([`root_path`]).
 pub fn config(prefix: &str) -> Result<Config> {
     check_prefix(prefix)?;
     let mut c = Config::default();
     c.global.prefix = FileName::new(file_prefix(prefix).as_bytes())
         .with_context(|| format!("stack prefix '{prefix}'"))?;
+    let root = root_path();
+    c.global.set_root_path(
+        &iceoryx2::prelude::Path::new(root.as_bytes())
+            .with_context(|| format!("iceoryx2 root folder '{root}'"))?,
+    );
     Ok(c)
+}
+
+/// The iceoryx2 root folder of this user's stacks: iceoryx2's own, `/tmp/iceoryx2/`, for root,
+/// `/tmp/iceoryx2-<uid>/` for any other user. iceoryx2 makes its root folder readable only by
+/// whoever made it first, so one shared folder locks every other user out (a `sudo afs run`
+/// once, and a user's stacks fail with "insufficient permissions"). The user is the machine's:
+/// inside a user namespace that `unshare --map-root-user` made (examples/two-hosts.sh), root is
+/// the user who made it, and sees that user's stacks. examples/python/afs_client.py follows the
+/// same rule.
+pub fn root_path() -> String {
+    // SAFETY: getuid has no preconditions and cannot fail.
+    let uid = unsafe { libc::getuid() };
+    let uid = std::fs::read_to_string("/proc/self/uid_map")
+        .ok()
+        .and_then(|map| machine_uid(&map, uid))
+        .unwrap_or(uid);
+    if uid == 0 {
+        "/tmp/iceoryx2/".into()
+    } else {
+        format!("/tmp/iceoryx2-{uid}/")
+    }
+}
+
+/// The machine's id of `uid` by a user namespace's `uid_map` (lines of: first id inside, first
+/// id outside, count); None if no line maps it.
+fn machine_uid(map: &str, uid: u32) -> Option<u32> {
+    map.lines().find_map(|line| {
+        let f: Vec<u64> = line
+            .split_whitespace()
+            .filter_map(|x| x.parse().ok())
+            .collect();
+        let (inside, outside, count) = (*f.first()?, *f.get(1)?, *f.get(2)?);
+        let uid = u64::from(uid);
+        (f.len() == 3 && inside <= uid && uid < inside + count)
+            .then(|| u32::try_from(outside + (uid - inside)).ok())
+            .flatten()
+    })
 }
 
 /// The iceoryx2 config of stack `prefix` as the TOML file iceoryx2 reads: with it in
@@ -460,6 +503,31 @@ pub use prefix::*;
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The init namespace maps every id to itself; `unshare --map-root-user` maps root to the
+    /// user who made the namespace; an id the map leaves out has no machine id.
+    #[test]
+    fn a_user_namespaces_root_is_the_user_who_made_it() {
+        assert_eq!(
+            machine_uid("         0          0 4294967295\n", 0),
+            Some(0)
+        );
+        assert_eq!(
+            machine_uid("         0          0 4294967295\n", 1000),
+            Some(1000)
+        );
+        assert_eq!(
+            machine_uid("         0       1000          1\n", 0),
+            Some(1000)
+        );
+        assert_eq!(machine_uid("         0       1000          1\n", 1), None);
+        assert_eq!(
+            machine_uid("0 100000 65536\n65536 1000 1\n", 65536),
+            Some(1000)
+        );
+        assert_eq!(machine_uid("0 100000 65536\n", 5), Some(100_005));
+        assert_eq!(machine_uid("garbage\n", 0), None);
+    }
 
     /// A client built for an older layout of a message (here `ServoSample` version 1, 208
     /// bytes) is refused when it opens the stream, with both versions named.

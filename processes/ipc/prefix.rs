@@ -231,9 +231,7 @@ fn segment_owner(stem: &str) -> &str {
 pub fn leftovers(prefix: &str) -> Vec<PathBuf> {
     let p = file_prefix(prefix);
     let mut out = Vec::new();
-    let root = config(prefix)
-        .map(|c| PathBuf::from(c.global.root_path().to_string()))
-        .unwrap_or_else(|_| PathBuf::from("/tmp/iceoryx2"));
+    let root = PathBuf::from(super::root_path());
     scan(Path::new("/dev/shm"), &p, &mut out, 0);
     scan(&root, &p, &mut out, 0);
     out

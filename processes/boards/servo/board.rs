@@ -176,6 +176,11 @@ impl ServoBoard {
         self.period_ns
     }
 
+    /// Whether it runs at SCHED_FIFO.
+    pub(super) fn is_fifo(&self) -> bool {
+        self.stats.flags.contains(LoopFlags::SCHED_FIFO)
+    }
+
     /// One tick, woken for `deadline`: force data through the gate, the scenario, one
     /// controller and one world step, the tick published, the estimator request moved along,
     /// the loop's statistics. Allocates nothing, takes no lock, logs nothing.

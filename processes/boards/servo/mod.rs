@@ -89,11 +89,15 @@ pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
         return Ok(ServoEnd::Stopped);
     };
     let period = board.period_ns();
+    let fifo = board.is_fifo();
     let mut deadline = rt::monotonic_ns() + period;
     let end = loop {
         rt::sleep_until(deadline);
         if stop.load(Ordering::Relaxed) {
             break ServoEnd::Stopped;
+        }
+        if !fifo && rt::monotonic_ns() > deadline + period {
+            rt::let_peers_run();
         }
         if board.tick(deadline) == Tick::Done {
             break ServoEnd::Finished;
