@@ -4,6 +4,6 @@
 
 pub mod bench;
 pub mod experiment;
-pub mod grid;
 pub mod plot;
+pub mod progress;
 pub mod sensor;

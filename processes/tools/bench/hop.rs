@@ -2,7 +2,7 @@
 //! transport in interleaved rounds.
 
 use super::transport::{
-    AtomicPage, PING, PONG, QUIT, TRANSPORTS, UPSTREAM, command, initiator_ports, pin_thread, ping,
+    AtomicPage, PING, PONG, QUIT, TRANSPORTS, UPSTREAM, command, initiator_ports, ping,
 };
 use super::{BenchOptions, PartReport, Series, finish_part, upstream};
 use crate::hist::{self, QuantilesUs};
@@ -141,7 +141,7 @@ fn measure(
     listener: &UnixListener,
     sock_path: &std::path::Path,
 ) -> Result<HopReport> {
-    pin_thread(0);
+    crate::rt::pin_thread(0, "afs bench");
     let page = AtomicPage::open(prefix, true)?;
     let node = ipc::node(prefix, "bench-initiator")?;
     let ports = initiator_ports(&node)?;

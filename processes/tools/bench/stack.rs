@@ -1,7 +1,6 @@
 //! The loop and stack parts: the servo's wake latency against a bare loop beside it, and the
 //! full graph's force age and wake latency without and with a CPU hog.
 
-use super::transport::pin_thread;
 use super::{BenchOptions, ConstFloor, PartReport, Series, finish_part};
 use crate::hist::{self, QuantilesUs};
 use crate::stack::{DEFAULT_STACK, StackFile};
@@ -321,7 +320,7 @@ fn scratch(prefix: &str) -> Result<PathBuf> {
 
 /// A busy loop on `cpu` at normal priority while `running`.
 fn hog(cpu: usize, running: &AtomicBool) {
-    pin_thread(cpu);
+    rt::pin_thread(cpu, "afs bench");
     let mut x = 0u64;
     while running.load(Ordering::Relaxed) {
         for _ in 0..10_000 {
@@ -354,7 +353,7 @@ enum Kind {
 /// stack ends; the messages it received.
 fn viewer(addr: &str, cpu: usize, running: &AtomicBool) -> u64 {
     // Where an operator's viewer runs: not on the servo's core.
-    pin_thread(cpu);
+    rt::pin_thread(cpu, "afs bench");
     use crate::observe::topics::TOPICS;
     use crate::observe::view_client::ViewClient;
     let all: Vec<&str> = TOPICS.iter().map(|t| t.0).collect();

@@ -347,19 +347,11 @@ pub(super) fn command(sock: &mut UnixStream, t: u32, count: u32) -> Result<()> {
     Ok(())
 }
 
-/// Pins the calling thread to `cpu` when it exists (a warning otherwise).
-pub(super) fn pin_thread(cpu: usize) {
-    let r = rt::setup(0, false, Some(cpu));
-    for w in r.warnings {
-        eprintln!("afs bench: warning: {w}");
-    }
-}
-
 /// The peer of the hop benchmark (`afs bench-peer`): answers every ping on the transport the
 /// initiator names, until told to quit.
 pub fn peer(prefix: &str, socket: &Path, cpu: Option<usize>) -> Result<()> {
     if let Some(c) = cpu {
-        pin_thread(c);
+        rt::pin_thread(c, "afs bench");
     }
     let node = ipc::node(prefix, "bench-peer")?;
     let wrench_sub = ipc::wrench(&node)?

@@ -226,7 +226,7 @@ pub(super) fn threads(s: &Services, a: &Participant, n: u32, cpu_b: usize) -> Re
     let ready = Barrier::new(2);
     std::thread::scope(|sc| {
         let b = sc.spawn(|| -> Result<()> {
-            super::transport::pin_thread(cpu_b);
+            crate::rt::pin_thread(cpu_b, "afs bench");
             let b = Participant::open(s, false);
             ready.wait();
             b?.run_b(n)

@@ -1,144 +1,24 @@
 //! `afs experiment NAME`: runs one of the in-process lockstep experiments, writes its plot and
-//! returns its report.
+//! returns its report; over many seeds (`--seeds`, [`sweep`]) or, for the insertion, over the
+//! grid of fits (`--grid`, [`grid`]).
 
-use crate::tools::plot;
-use afs_shared::check::Check;
-use afs_shared::experiments::{self, Options, Run};
+mod grid;
+mod one;
+mod sweep;
+
+pub use grid::{GridPoint, GridReport, grid};
+pub use one::{ExperimentReport, Timing, run};
+pub use sweep::{SweepReport, sweep};
+
+use crate::tools::progress::Progress;
+use afs_shared::experiments::{self, Options};
 use afs_shared::setups::Rig;
 use anyhow::{Context, Result, bail};
-use serde::{Deserialize, Serialize};
-use serde_json::Value;
+use serde::Serialize;
 use std::fmt;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::atomic::AtomicBool;
-use std::time::Instant;
-
-/// What running an experiment cost.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct Timing {
-    /// Simulated time (s).
-    pub simulated_s: f64,
-    /// Wall-clock time (s).
-    pub wall_s: f64,
-    /// CPU time of this process (s).
-    pub cpu_s: f64,
-    /// Simulated seconds per CPU second.
-    pub realtime_factor: f64,
-}
-
-/// The report of one experiment (documented in docs/experiments.md).
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct ExperimentReport {
-    /// Experiment name (`fig4.8`, ...).
-    pub experiment: String,
-    /// Seed of the sensor noise and surface roughness.
-    pub seed: u64,
-    /// The rig (`afs` or `thesis`).
-    pub rig: Rig,
-    /// True when every check passes.
-    pub passed: bool,
-    /// The measured figures; their shape is the experiment's own.
-    pub summary: Value,
-    /// Acceptance checks.
-    pub checks: Vec<Check>,
-    /// Simulated time (s).
-    pub simulated_s: f64,
-    /// Path of the plot.
-    pub plot: String,
-    /// What running it cost.
-    pub timing: Timing,
-}
-
-impl fmt::Display for ExperimentReport {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        writeln!(
-            f,
-            "{}: {} (plot {}, {:.1} s simulated in {:.2} s CPU)",
-            self.experiment,
-            if self.passed { "PASS" } else { "FAIL" },
-            self.plot,
-            self.timing.simulated_s,
-            self.timing.cpu_s,
-        )?;
-        for c in &self.checks {
-            writeln!(f, "  {}", c.line())?;
-        }
-        Ok(())
-    }
-}
-
-/// The plot's file name without extension: `fig4_7`, or `fig4_7_thesis` on the thesis rig.
-fn file_stem(name: &str, rig: Rig) -> String {
-    let stem = name.replace('.', "_");
-    match rig {
-        Rig::Afs => stem,
-        other => format!("{stem}_{}", other.name()),
-    }
-}
-
-/// The names of the experiments of the thesis's rig.
-fn friction_names() -> String {
-    let names: Vec<&str> = experiments::REGISTRY
-        .iter()
-        .filter(|e| e.friction)
-        .map(|e| e.name)
-        .collect();
-    names.join(", ")
-}
-
-/// Runs experiment `name` without plotting it.
-fn compute(name: &str, opts: &Options) -> Result<Run> {
-    let e = experiments::find(name).with_context(|| {
-        let names: Vec<&str> = experiments::REGISTRY.iter().map(|e| e.name).collect();
-        format!(
-            "unknown experiment '{name}'; choose one of: {}",
-            names.join(", ")
-        )
-    })?;
-    if opts.rig != Rig::Afs && !e.friction {
-        bail!(
-            "the {} rig is defined for the friction experiments ({}); run {name} without --rig",
-            opts.rig.name(),
-            friction_names()
-        );
-    }
-    Ok((e.run)(opts)?)
-}
-
-/// Runs experiment `name`, writes its plot into `out_dir`.
-pub fn run(name: &str, opts: &Options, out_dir: &Path) -> Result<ExperimentReport> {
-    std::fs::create_dir_all(out_dir)
-        .with_context(|| format!("creating output directory {}", out_dir.display()))?;
-    let started = Instant::now();
-    let cpu0 = crate::procfs::cpu_seconds();
-    let out = compute(name, opts)?;
-    let wall = started.elapsed().as_secs_f64();
-    let cpu = crate::procfs::cpu_seconds() - cpu0;
-    let file = out_dir.join(format!("{}.svg", file_stem(name, opts.rig)));
-    plot::render(&out.figure, &file)?;
-    let passed = afs_shared::check::all_pass(&out.checks);
-    Ok(ExperimentReport {
-        experiment: name.to_string(),
-        seed: opts.seed,
-        rig: opts.rig,
-        passed,
-        summary: out.summary,
-        checks: out.checks,
-        simulated_s: out.simulated_s,
-        plot: file.display().to_string(),
-        timing: Timing {
-            simulated_s: out.simulated_s,
-            wall_s: wall,
-            cpu_s: cpu,
-            realtime_factor: if cpu > 0.0 {
-                out.simulated_s / cpu
-            } else {
-                0.0
-            },
-        },
-    })
-}
 
 /// Seeds `first..=last`, from `A..B` or `A..=B` (both inclusive).
 pub fn parse_seeds(s: &str) -> Result<std::ops::RangeInclusive<u64>> {
@@ -159,170 +39,6 @@ pub fn parse_seeds(s: &str) -> Result<std::ops::RangeInclusive<u64>> {
         bail!("--seeds '{s}': at most 100000 seeds at once");
     }
     Ok(a..=b)
-}
-
-/// An experiment over many seeds (`afs experiment NAME --seeds A..B`).
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct SweepReport {
-    /// Experiment name.
-    pub experiment: String,
-    /// First and last seed (inclusive).
-    pub seeds: [u64; 2],
-    /// The rig (`afs` or `thesis`).
-    pub rig: Rig,
-    /// Threads used.
-    pub jobs: usize,
-    /// True when every check passed at every seed.
-    pub passed: bool,
-    /// Each check over the seeds.
-    pub checks: Vec<afs_shared::sweep::CheckSweep>,
-    /// Path of the plot (each check's figure / limit over the seeds).
-    pub plot: String,
-    /// Wall time of the sweep (s).
-    pub wall_s: f64,
-    /// Sum of the single runs' wall times (s): what one thread would have taken.
-    pub runs_wall_s: f64,
-    /// wall_s / runs_wall_s (1: no gain from the threads).
-    pub wall_ratio: f64,
-    /// CPU time of this process during the sweep (s).
-    pub cpu_s: f64,
-}
-
-impl fmt::Display for SweepReport {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        writeln!(
-            f,
-            "{} over seeds {}..={}: {} ({} threads, {:.1} s, {:.2}x the single runs' {:.1} s; plot {})",
-            self.experiment,
-            self.seeds[0],
-            self.seeds[1],
-            if self.passed { "PASS" } else { "FAIL" },
-            self.jobs,
-            self.wall_s,
-            self.wall_ratio,
-            self.runs_wall_s,
-            self.plot
-        )?;
-        for c in &self.checks {
-            writeln!(
-                f,
-                "  {:5.1} % pass [{:.1}, {:.1}]  {} {} {}: median {:.4}, p90 {:.4}, worst {:.4} (seed {}){}",
-                100.0 * c.pass_rate,
-                100.0 * c.pass_rate_wilson_95[0],
-                100.0 * c.pass_rate_wilson_95[1],
-                c.name,
-                c.relation.symbol(),
-                c.limit,
-                c.median,
-                c.p90,
-                c.worst,
-                c.worst_seed,
-                if c.failed_seeds.is_empty() || c.failed_seeds.len() > 10 {
-                    String::new()
-                } else {
-                    format!("; failed at {:?}", c.failed_seeds)
-                }
-            )?;
-        }
-        Ok(())
-    }
-}
-
-/// Runs experiment `name` at every seed of `seeds` on `jobs` threads (the core is pure: each
-/// run owns its state) and summarises each check; writes the plot into `out_dir`. Stops early
-/// (with an error) if `stop` is set.
-pub fn sweep(
-    name: &str,
-    opts: &Options,
-    seeds: std::ops::RangeInclusive<u64>,
-    jobs: usize,
-    out_dir: &Path,
-    stop: &std::sync::atomic::AtomicBool,
-) -> Result<SweepReport> {
-    use std::sync::Mutex;
-    use std::sync::atomic::{AtomicU64, Ordering};
-    std::fs::create_dir_all(out_dir)
-        .with_context(|| format!("creating output directory {}", out_dir.display()))?;
-    let jobs = jobs.max(1);
-    let (first, last) = (*seeds.start(), *seeds.end());
-    let next = AtomicU64::new(first);
-    let results: Mutex<Vec<(u64, Vec<Check>, f64)>> = Mutex::new(Vec::new());
-    let error: Mutex<Option<anyhow::Error>> = Mutex::new(None);
-    let started = Instant::now();
-    let cpu0 = crate::procfs::cpu_seconds();
-    std::thread::scope(|scope| {
-        for _ in 0..jobs {
-            scope.spawn(|| {
-                loop {
-                    if stop.load(Ordering::Relaxed) {
-                        return;
-                    }
-                    let seed = next.fetch_add(1, Ordering::Relaxed);
-                    if seed > last {
-                        return;
-                    }
-                    let o = Options {
-                        seed,
-                        ..opts.clone()
-                    };
-                    let t0 = Instant::now();
-                    match compute(name, &o) {
-                        Ok(p) => {
-                            let wall = t0.elapsed().as_secs_f64();
-                            results
-                                .lock()
-                                .unwrap_or_else(|e| e.into_inner())
-                                .push((seed, p.checks, wall));
-                        }
-                        Err(e) => {
-                            error
-                                .lock()
-                                .unwrap_or_else(|e| e.into_inner())
-                                .get_or_insert(e.context(format!("{name} at seed {seed}")));
-                            stop.store(true, Ordering::Relaxed);
-                            return;
-                        }
-                    }
-                }
-            });
-        }
-    });
-    if let Some(e) = error.into_inner().unwrap_or_else(|e| e.into_inner()) {
-        return Err(e);
-    }
-    let mut results = results.into_inner().unwrap_or_else(|e| e.into_inner());
-    if results.len() as u64 != last - first + 1 {
-        bail!(
-            "interrupted after {} of {} seeds",
-            results.len(),
-            last - first + 1
-        );
-    }
-    results.sort_by_key(|r| r.0);
-    let wall_s = started.elapsed().as_secs_f64();
-    let cpu_s = crate::procfs::cpu_seconds() - cpu0;
-    let runs_wall_s: f64 = results.iter().map(|r| r.2).sum();
-    let runs: Vec<(u64, Vec<Check>)> = results.into_iter().map(|(s, c, _)| (s, c)).collect();
-    let checks = afs_shared::sweep::summarize(&runs);
-    let file = out_dir.join(format!("{}_seeds.svg", file_stem(name, opts.rig)));
-    plot::render(&afs_shared::sweep::figure(name, &runs, &checks), &file)?;
-    Ok(SweepReport {
-        experiment: name.to_string(),
-        seeds: [first, last],
-        rig: opts.rig,
-        jobs,
-        passed: checks.iter().all(|c| c.passes == c.runs),
-        checks,
-        plot: file.display().to_string(),
-        wall_s,
-        runs_wall_s,
-        wall_ratio: if runs_wall_s > 0.0 {
-            wall_s / runs_wall_s
-        } else {
-            0.0
-        },
-        cpu_s,
-    })
 }
 
 /// The options of `afs experiment`.
@@ -523,7 +239,7 @@ pub fn command(a: &ExperimentArgs, stop: &AtomicBool) -> Result<ExitCode> {
             if jobs == 0 {
                 bail!("--jobs must be at least 1");
             }
-            let report = crate::tools::grid::grid(&opts, range, jobs, &a.out, stop)?;
+            let report = grid(&opts, range, jobs, &a.out, stop)?;
             show(Some(&report), a.json);
             print_json(std::slice::from_ref(&report), a.json)?;
             report.passed
@@ -536,7 +252,13 @@ pub fn command(a: &ExperimentArgs, stop: &AtomicBool) -> Result<ExitCode> {
             }
             let mut reports = Vec::new();
             for n in names {
-                reports.push(sweep(n, &opts, range.clone(), jobs, &a.out, stop)?);
+                let progress = Progress::new(
+                    &format!("{n} over seeds {}..={}", range.start(), range.end()),
+                    range.end() - range.start() + 1,
+                );
+                let report = sweep(n, &opts, range.clone(), jobs, &a.out, stop, &progress);
+                progress.finish();
+                reports.push(report?);
                 show(reports.last(), a.json);
             }
             print_json(&reports, a.json)?;
@@ -589,5 +311,4 @@ fn print_json<R: Serialize>(reports: &[R], json: bool) -> Result<()> {
 }
 
 #[cfg(test)]
-#[path = "experiment_tests.rs"]
 mod tests;

@@ -2,8 +2,9 @@
 //! (clearance × μ × chamfer, docs/insertion.md) for the three methods, each point a seed sweep:
 //! the table of success rates and the plot of success against clearance.
 
-use crate::tools::experiment::sweep;
+use super::sweep::sweep;
 use crate::tools::plot;
+use crate::tools::progress::Progress;
 use afs_shared::experiments::{Figure, Options, Panel, Series};
 use afs_shared::insertion::controller::Method;
 use anyhow::{Context, Result};
@@ -105,7 +106,17 @@ pub fn grid(
     let started = Instant::now();
     // Each point's seed plot is of no use here: it goes to a scratch folder, removed after.
     let scratch = std::env::temp_dir().join(format!("afs-grid-{}", std::process::id()));
-    let points = run_points(opts, &seeds, jobs, &scratch, stop);
+    let points_n = CLEARANCES.len() * MUS.len() * CHAMFERS_MM.len() * Method::ALL.len();
+    let progress = Progress::new(
+        &format!(
+            "insertion grid ({points_n} points) over seeds {}..={}",
+            seeds.start(),
+            seeds.end()
+        ),
+        points_n as u64 * (seeds.end() - seeds.start() + 1),
+    );
+    let points = run_points(opts, &seeds, jobs, &scratch, stop, &progress);
+    progress.finish();
     let _ = std::fs::remove_dir_all(&scratch);
     let points = points?;
     let dither_at_least_both = points
@@ -134,6 +145,7 @@ fn run_points(
     jobs: usize,
     scratch: &Path,
     stop: &AtomicBool,
+    progress: &Progress,
 ) -> Result<Vec<GridPoint>> {
     let mut points = Vec::new();
     for c in CLEARANCES {
@@ -145,10 +157,18 @@ fn run_points(
                     o.insertion.mu = mu;
                     o.insertion.chamfer_mm = chamfer;
                     o.insertion.method = method;
-                    let r = sweep("insertion", &o, seeds.clone(), jobs, scratch, stop)
-                        .with_context(|| {
-                            format!("grid point c = {c}, μ = {mu}, chamfer {chamfer} mm")
-                        })?;
+                    let r = sweep(
+                        "insertion",
+                        &o,
+                        seeds.clone(),
+                        jobs,
+                        scratch,
+                        stop,
+                        progress,
+                    )
+                    .with_context(|| {
+                        format!("grid point c = {c}, μ = {mu}, chamfer {chamfer} mm")
+                    })?;
                     let check = |id: &str| r.checks.iter().find(|k| k.id == id);
                     let inserted =
                         check("inserted").context("insertion has no `inserted` check")?;
