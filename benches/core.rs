@@ -17,12 +17,13 @@
 //! `insertion_mujoco_rig_tick` and `insertion_mujoco_arm_rig_tick` are the rig's tick on
 //! MuJoCo's peg (4 MuJoCo steps a tick), the latter with MuJoCo's arm carrying it (4 more).
 
+use afs_shared::config::SimConfig;
 use afs_shared::friction::FrictionLaw;
 use afs_shared::insertion::controller::Phase;
 use afs_shared::insertion::drive::Drive;
 use afs_shared::insertion::rig::{InsertionOptions, InsertionRig};
 use afs_shared::servo::ServoInput;
-use afs_shared::sim::{Lockstep, SimConfig};
+use afs_shared::sim::Lockstep;
 use afs_shared::tangent::{self, ProbeModel, TangentParams};
 use afs_shared::tuner::{ThesisTunerParams, Tuner, TunerConfig, TunerInput};
 use afs_shared::world::WorldConfig;

@@ -92,7 +92,7 @@ fn slow_tuning_drives_the_mean_friction_near_zero() {
 #[test]
 fn thesis_rig_shows_growth_and_normal_force_swings() {
     let on = |rig: Rig| {
-        let mut base = afs_shared::sim::SimConfig::default();
+        let mut base = afs_shared::config::SimConfig::default();
         rig.apply(&mut base).unwrap();
         Options {
             base,

@@ -6,10 +6,10 @@
 #![cfg(feature = "mujoco")]
 
 use afs_shared::check::{self, Check};
+use afs_shared::config::SimConfig;
 use afs_shared::experiments::{self, Options};
 use afs_shared::insertion::drive::Drive;
 use afs_shared::setups::{ROBOT_RATES_HZ, set_rate};
-use afs_shared::sim::SimConfig;
 use afs_shared::world::WorldKind;
 use std::time::Duration;
 

@@ -55,6 +55,18 @@ struct RunArgs {
     /// Seed of the sensor noise (`afs chaos`: also of the fault plan).
     #[arg(long)]
     seed: Option<u64>,
+    /// The servo rate (Hz): 10000 (the thesis's rig), 1000 (Franka FCI), 500 (UR e-Series);
+    /// the stack file's `[sim.servo] rate_hz`, as `afs experiment --rate-hz`.
+    #[arg(long, value_name = "HZ")]
+    rate_hz: Option<f64>,
+    /// The world the servo drives: `builtin` or `mujoco` (`[sim.world] kind`), as `afs
+    /// experiment --plant`.
+    #[arg(long, value_parser = ["builtin", "mujoco"])]
+    plant: Option<String>,
+    /// A MuJoCo model of your own arm (implies --plant mujoco; `[sim.world] mjcf`), as `afs
+    /// experiment --mjcf` (docs/mujoco.md, *Your own arm*).
+    #[arg(long, value_name = "FILE")]
+    mjcf: Option<PathBuf>,
     /// Wall time the run may take (s) before the supervisor stops it and fails it (check
     /// `reached_end`); default: the stack file's `wall_limit_s`, or 1.5 × the duration + 30 s.
     #[arg(long, value_name = "S")]
@@ -97,6 +109,11 @@ fn run_stack(a: RunArgs, chaos: Option<afs::stack::ChaosOptions>) -> Result<Exit
         duration: a.duration,
         prefix: a.prefix,
         seed: a.seed,
+        sim: afs::stack::SimOverrides {
+            rate_hz: a.rate_hz,
+            plant: a.plant,
+            mjcf: a.mjcf,
+        },
         wall_limit_s: a.wall_limit_s,
         record: a.record,
         progress: !a.quiet,
@@ -295,6 +312,13 @@ enum Command {
         #[arg(long)]
         cpu: Option<usize>,
     },
+    /// Draw the process graph of a stack (SVG): the boards, the supervisor, the link board and
+    /// the clients, and the iceoryx2 services each one writes and reads (the README's picture).
+    Graph {
+        /// Output SVG.
+        #[arg(long, default_value = "docs/stack.svg")]
+        out: PathBuf,
+    },
     /// Draw the force, position and dither histories of a recording (SVG).
     Plot {
         /// The MCAP file from `afs run --record`.
@@ -388,6 +412,11 @@ fn run() -> Result<ExitCode> {
                 answer_within_s: 1.0,
             };
             print(&afs::tools::sensor::run(&opts, &stop)?, json)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Graph { out } => {
+            afs::tools::graph::render(&out)?;
+            say!("wrote {}", out.display());
             Ok(ExitCode::SUCCESS)
         }
         Command::Plot { file, out } => {

@@ -9,9 +9,9 @@ pub mod servo;
 
 use crate::ipc::{self, Svc};
 use crate::rt;
+use afs_shared::config::SimConfig;
 use afs_shared::msg::{self, Board, BoardStartup};
 use afs_shared::scenario::Scenario;
-use afs_shared::sim::SimConfig;
 use anyhow::{Context, Result};
 use iceoryx2::node::Node;
 use iceoryx2::port::publisher::Publisher;

@@ -5,6 +5,8 @@
 //! memory segment and every file under the iceoryx2 root with names starting `afs_P_`, so two
 //! stacks run side by side and a stack's leftovers are easy to find (`leftovers`).
 
+pub mod graph;
+
 use afs_shared::msg::{
     BoardStartup, FrictionReport, LoopStats, PegSample, PlantSample, RotationRequestHeader,
     RotationResponse, RotationSample, SensorStats, ServoBatch, ServoCommand, ServoSample,

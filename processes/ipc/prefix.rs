@@ -344,6 +344,34 @@ pub fn end_stack(prefix: &str, own: &[i32]) -> Result<StackEnd> {
     Ok(end)
 }
 
+/// Every service of stack `prefix` with the names of the live nodes registered on it (what
+/// `tests/stack` holds the picture of `afs graph` against).
+pub fn service_nodes(
+    prefix: &str,
+) -> Result<std::collections::BTreeMap<String, std::collections::BTreeSet<String>>> {
+    let cfg = config(prefix)?;
+    let mut out = std::collections::BTreeMap::new();
+    Svc::list(&cfg, |s| {
+        let nodes = s
+            .dynamic_details
+            .as_ref()
+            .map(|d| {
+                d.nodes
+                    .iter()
+                    .filter_map(|n| match n {
+                        NodeState::Alive(v) => v.details().as_ref().map(|x| x.name().to_string()),
+                        _ => None,
+                    })
+                    .collect()
+            })
+            .unwrap_or_default();
+        out.insert(s.static_details.name().to_string(), nodes);
+        CallbackProgression::Continue
+    })
+    .with_context(|| format!("listing the services of stack '{prefix}'"))?;
+    Ok(out)
+}
+
 /// The services of stack `prefix` on which a node of process `pid` is registered.
 fn services_of(prefix: &str, pid: i32) -> Result<Vec<String>> {
     let cfg = config(prefix)?;

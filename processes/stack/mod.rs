@@ -10,10 +10,10 @@ pub use footprint::Footprint;
 pub use timeline::Timeline;
 
 use crate::ipc;
+use afs_shared::config::SimConfig;
 use afs_shared::faults::FaultKind;
 use afs_shared::msg::{self, Board};
 use afs_shared::scenario;
-use afs_shared::sim::SimConfig;
 use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -253,6 +253,8 @@ pub struct RunOptions {
     pub prefix: Option<String>,
     /// Override.
     pub seed: Option<u64>,
+    /// Overrides of the set-up's `[sim]` table.
+    pub sim: SimOverrides,
     /// Override of the wall-time limit (s).
     pub wall_limit_s: Option<f64>,
     /// Record every topic to this MCAP file.
@@ -264,6 +266,105 @@ pub struct RunOptions {
     /// Serve a live view to Foxglove.
     pub foxglove: Option<crate::observe::view::ViewSettings>,
 }
+
+/// The command line's settings of the set-up, the same flags as `afs experiment`'s: each
+/// overrides its key of the stack file's `[sim]` table.
+#[derive(Debug, Clone, Default)]
+pub struct SimOverrides {
+    /// `[sim.servo] rate_hz`.
+    pub rate_hz: Option<f64>,
+    /// `[sim.world] kind`.
+    pub plant: Option<String>,
+    /// `[sim.world] mjcf` (and `kind = "mujoco"`).
+    pub mjcf: Option<PathBuf>,
+}
+
+impl SimOverrides {
+    /// Writes the overrides into the `[sim]` table `sim` (made if there is none).
+    fn apply(&self, sim: &mut Option<toml::Table>) -> Result<()> {
+        let mut set = |table: &str, key: &str, value: toml::Value| {
+            let t = sim
+                .get_or_insert_with(toml::Table::new)
+                .entry(table)
+                .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+            match t {
+                toml::Value::Table(t) => {
+                    t.insert(key.into(), value);
+                    Ok(())
+                }
+                _ => Err(anyhow::anyhow!(
+                    "the stack file's [sim] has `{table}` that is not a table"
+                )),
+            }
+        };
+        if let Some(hz) = self.rate_hz {
+            if !(hz.is_finite() && hz > 0.0) {
+                bail!("--rate-hz {hz} must be a rate in Hz > 0 (10000, 1000 or 500)");
+            }
+            set("servo", "rate_hz", hz.into())?;
+        }
+        if let Some(kind) = &self.plant {
+            set("world", "kind", kind.clone().into())?;
+        }
+        if let Some(path) = &self.mjcf {
+            // The boards run from another directory: the model's path made absolute.
+            let abs = std::fs::canonicalize(path)
+                .with_context(|| format!("--mjcf {}: no such model", path.display()))?;
+            set("world", "kind", "mujoco".into())?;
+            set("world", "mjcf", abs.display().to_string().into())?;
+        }
+        Ok(())
+    }
+}
+
+/// The set-up of a stack file, for the commands that run no stack (`afs experiment
+/// --config`): its `[sim]` table on the defaults; the rest of the file (processes, prefix,
+/// scenario) is the stack's and is not read. One file serves both.
+pub fn setup_of(path: &Path) -> Result<SimConfig> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("reading config {}", path.display()))?;
+    let doc: toml::Table =
+        toml::from_str(&text).with_context(|| format!("parsing config {}", path.display()))?;
+    let bare: Vec<&str> = doc
+        .keys()
+        .map(String::as_str)
+        .filter(|k| SETUP_KEYS.contains(k))
+        .collect();
+    if !bare.is_empty() {
+        bail!(
+            "config {}: `{}` belongs under [sim], as in a stack file (e.g. [sim.{}] instead of \
+             [{}]; examples/stack.toml)",
+            path.display(),
+            bare.join("`, `"),
+            bare[0],
+            bare[0]
+        );
+    }
+    let sim = match doc.get("sim") {
+        Some(toml::Value::Table(t)) => t.clone(),
+        Some(_) => bail!("config {}: `sim` must be a table ([sim])", path.display()),
+        None => toml::Table::new(),
+    };
+    let cfg: SimConfig = toml::Value::Table(sim)
+        .try_into()
+        .with_context(|| format!("config {}: [sim]", path.display()))?;
+    cfg.validate()
+        .map_err(|e| anyhow::anyhow!("config {}: {e}", path.display()))?;
+    Ok(cfg)
+}
+
+/// The tables and keys of a set-up ([`SimConfig`]'s fields), which a stack file has under
+/// `[sim]`.
+const SETUP_KEYS: [&str; 8] = [
+    "plant",
+    "surface",
+    "sensor",
+    "servo",
+    "start_u_m",
+    "tangent_error_rad",
+    "world",
+    "insertion",
+];
 
 /// What `afs chaos` injects.
 #[derive(Debug, Clone)]
@@ -303,6 +404,7 @@ pub fn load_stack(opts: &RunOptions) -> Result<StackFile> {
     if let Some(x) = opts.wall_limit_s {
         s.wall_limit_s = Some(x);
     }
+    opts.sim.apply(&mut s.sim)?;
     s.check()?;
     Ok(s)
 }
@@ -326,4 +428,81 @@ pub fn resolve_binary(name: &str) -> Result<PathBuf> {
         "binary '{name}' not found next to {} (build it with `cargo build --release`)",
         exe.display()
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn file(name: &str, text: &str) -> PathBuf {
+        let f = std::env::temp_dir().join(format!("afs-setup-{}-{name}", std::process::id()));
+        std::fs::write(&f, text).unwrap();
+        f
+    }
+
+    /// One file for both: `afs experiment --config` reads a stack file's `[sim]` table (the
+    /// example without feedforward), a file without `[sim]` is the default set-up, and a
+    /// set-up table outside `[sim]` (the old bare format) is refused with the fix.
+    #[test]
+    fn an_experiment_reads_a_stack_files_set_up() {
+        let example = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/no-feedforward.toml");
+        assert!(!setup_of(&example).unwrap().servo.inertia_feedforward);
+        let stack = file("stack.toml", DEFAULT_STACK);
+        assert_eq!(setup_of(&stack).unwrap(), SimConfig::default());
+        let bare = file("bare.toml", "[servo]\ninertia_feedforward = false\n");
+        let e = format!("{:#}", setup_of(&bare).unwrap_err());
+        assert!(
+            e.contains("`servo` belongs under [sim]") && e.contains("[sim.servo]"),
+            "{e}"
+        );
+        let odd = file("odd.toml", "sim = 3\n");
+        assert!(format!("{:#}", setup_of(&odd).unwrap_err()).contains("must be a table"));
+        let typo = file("typo.toml", "[sim.servo]\ninertia_feedfoward = false\n");
+        assert!(format!("{:#}", setup_of(&typo).unwrap_err()).contains("inertia_feedfoward"));
+        for f in [stack, bare, odd, typo] {
+            let _ = std::fs::remove_file(f);
+        }
+    }
+
+    /// `--rate-hz`, `--plant` and `--mjcf` of `afs run` land on the keys of `[sim]` that
+    /// `afs experiment`'s flags set, beside what the stack file has there; a rate that is no
+    /// rate and a model that is not there are refused.
+    #[test]
+    fn the_run_flags_set_the_stack_files_set_up() {
+        let model = file("arm.xml", "<mujoco/>");
+        let mut sim: Option<toml::Table> = Some(toml::from_str("[servo]\nkp = 1.0\n").unwrap());
+        SimOverrides {
+            rate_hz: Some(1000.0),
+            plant: None,
+            mjcf: Some(model.clone()),
+        }
+        .apply(&mut sim)
+        .unwrap();
+        let sim = sim.unwrap();
+        assert_eq!(sim["servo"]["rate_hz"].as_float(), Some(1000.0));
+        assert_eq!(sim["servo"]["kp"].as_float(), Some(1.0));
+        assert_eq!(sim["world"]["kind"].as_str(), Some("mujoco"));
+        assert!(sim["world"]["mjcf"].as_str().unwrap().starts_with('/'));
+        let mut none = None;
+        SimOverrides {
+            plant: Some("builtin".into()),
+            ..Default::default()
+        }
+        .apply(&mut none)
+        .unwrap();
+        assert_eq!(none.unwrap()["world"]["kind"].as_str(), Some("builtin"));
+        for bad in [
+            SimOverrides {
+                rate_hz: Some(0.0),
+                ..Default::default()
+            },
+            SimOverrides {
+                mjcf: Some("/nonexistent/arm.xml".into()),
+                ..Default::default()
+            },
+        ] {
+            assert!(bad.apply(&mut None).is_err(), "{bad:?}");
+        }
+        let _ = std::fs::remove_file(model);
+    }
 }

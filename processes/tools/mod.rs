@@ -4,6 +4,7 @@
 
 pub mod bench;
 pub mod experiment;
+pub mod graph;
 pub mod plot;
 pub mod progress;
 pub mod sensor;

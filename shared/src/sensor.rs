@@ -31,6 +31,17 @@ pub struct Wrench {
     pub torque: f64,
 }
 
+impl Wrench {
+    /// This reading with the zero-load reading `tare` taken off: what the controllers use.
+    /// The one place the tare is subtracted.
+    pub fn tared(self, tare: Wrench) -> Wrench {
+        Wrench {
+            force: self.force - tare.force,
+            torque: self.torque - tare.torque,
+        }
+    }
+}
+
 /// Sensor parameters.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]

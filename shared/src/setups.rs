@@ -1,6 +1,6 @@
 //! Set-ups the scenarios and the experiments share: the corner profile and the rigs.
 
-use crate::sim::SimConfig;
+use crate::config::SimConfig;
 use serde::{Deserialize, Serialize};
 
 /// The corner profile: faces of 20 mm at 0°, +10°, −5°, +15°, +5° (turns +10°, −15°, +20°,

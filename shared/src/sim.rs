@@ -3,103 +3,16 @@
 //! servo (default 10 kHz) uses the latest sample, exactly as the multi-process stack does in
 //! real time; the same [`World`], [`SensorModel`] and [`ServoCore`] code runs in both.
 
-use crate::arm::{Arm, Elbow};
+use crate::config::SimConfig;
 use crate::error::{ConfigError, SnapshotError};
-use crate::insertion::rig::InsertionOptions;
-use crate::math::Vec2;
-use crate::plant::{PlantParams, PlantTruth};
-use crate::sensor::{Reading, SensorModel, SensorParams, Wrench};
-use crate::servo::{ServoCore, ServoInput, ServoParams};
+use crate::plant::PlantTruth;
+use crate::sensor::{Reading, SensorModel, Wrench};
+use crate::servo::ServoCore;
 use crate::surface::Surface;
 use crate::tangent::{self, TangentOutcome};
-use crate::world::{World, WorldConfig};
-use serde::{Deserialize, Serialize};
-
-/// Everything that defines a simulated set-up.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct SimConfig {
-    /// The world.
-    pub plant: PlantParams,
-    /// The surface.
-    pub surface: Surface,
-    /// The force sensor.
-    pub sensor: SensorParams,
-    /// The servo board.
-    pub servo: ServoParams,
-    /// Where along the surface the tool starts, in pressed contact at the preload (m, u).
-    pub start_u_m: f64,
-    /// Error of the initial tangent estimate (rad): estimate = true tangent + this.
-    pub tangent_error_rad: f64,
-    /// Seed of the sensor noise.
-    pub seed: u64,
-    /// Which world the servo drives (builtin or MuJoCo).
-    pub world: WorldConfig,
-    /// The insertion's fit, initial errors, method and limits (`insertion` scenario and
-    /// experiment; docs/insertion.md).
-    pub insertion: InsertionOptions,
-}
-
-impl Default for SimConfig {
-    /// The thesis set-up: a flat surface under the arm's decoupled operating point (tip at
-    /// (0.4, 0) m, link 2 pointing into the surface), thesis friction, 2.5 N preload.
-    fn default() -> Self {
-        let plant = PlantParams::default();
-        let arm = Arm::new(plant.arm);
-        let q = arm
-            .decoupled_configuration(0.0, Elbow::Negative)
-            .unwrap_or_default();
-        let tip = arm.forward(q);
-        Self {
-            plant,
-            surface: Surface::plane(tip, 0.0),
-            sensor: SensorParams::default(),
-            servo: ServoParams::default(),
-            start_u_m: 0.0,
-            tangent_error_rad: 0.0,
-            seed: 1,
-            world: WorldConfig::default(),
-            insertion: InsertionOptions::default(),
-        }
-    }
-}
-
-impl SimConfig {
-    /// Checks the whole set-up.
-    pub fn validate(&self) -> Result<(), ConfigError> {
-        self.plant.validate()?;
-        self.surface.validate()?;
-        self.sensor.validate()?;
-        self.servo.validate()?;
-        self.world.validate()?;
-        self.insertion.validate()?;
-        if !self.start_u_m.is_finite() || !self.tangent_error_rad.is_finite() {
-            return Err(ConfigError::rule(
-                "start_u_m and tangent_error_rad",
-                "must be finite",
-            ));
-        }
-        if self.tangent_error_rad.abs() > 0.5 {
-            return Err(ConfigError::setting(
-                "tangent_error_rad",
-                self.tangent_error_rad,
-                "is beyond ±0.5 rad; the hybrid controller needs a rough estimate",
-            ));
-        }
-        Ok(())
-    }
-
-    /// The joint angles that put the tool at the start point pressed in to the preload.
-    pub fn start_configuration(&self) -> Result<nalgebra::Vector2<f64>, ConfigError> {
-        let arm = Arm::new(self.plant.arm);
-        let on_surface = self.surface.point_at(self.start_u_m);
-        let angle = self.surface.tangent_angle_at(self.start_u_m);
-        let normal = crate::math::perp(crate::math::unit(angle));
-        let depth = self.servo.hybrid.preload_n / self.plant.contact.stiffness();
-        let tip: Vec2 = on_surface - normal * depth;
-        Ok(arm.inverse(tip, self.plant.elbow)?)
-    }
-}
+use crate::tick::{Force, Step, servo_tick};
+use crate::world::World;
+use serde::Serialize;
 
 /// Zeroes the sensor in free air, as before contact: the mean of 0.1 s of zero-load readings.
 pub fn tare(sensor: &mut SensorModel) -> Wrench {
@@ -164,15 +77,12 @@ impl Lockstep {
             reading = sensor.sample(world.truth().sensor_wrench);
         }
         let tangent = cfg.surface.tangent_angle_at(cfg.start_u_m) + cfg.tangent_error_rad;
-        let mut wrench0 = reading.wrench;
-        wrench0.force -= tare.force;
-        wrench0.torque -= tare.torque;
         let mut servo = ServoCore::new(
             cfg.servo,
             cfg.plant.arm,
             cfg.plant.elbow,
             q,
-            wrench0,
+            reading.wrench.tared(tare),
             tangent,
         )?;
         servo.set_tare(tare);
@@ -195,23 +105,30 @@ impl Lockstep {
 
     /// One servo period: sensor samples due, servo tick, plant step.
     pub fn step(&mut self) {
+        self.step_with(|_, _| Step::Ran);
+    }
+
+    /// One servo period with `before` first: the sensor samples due, then [`servo_tick`] (the
+    /// servo board's tick routine: `before`, the controller, the world), then the estimator.
+    /// The stack's lockstep reference drives its scenario and replays the stack's commands in
+    /// `before`; [`Step::Done`] from it ends the period with nothing stepped.
+    pub fn step_with(&mut self, before: impl FnOnce(&World, &mut ServoCore) -> Step) -> Step {
         let t = self.ticks as f64 * self.dt;
         while (self.sensor_ticks as f64) * self.sensor_period <= t + 1e-12 {
             self.reading = self.sensor.sample(self.world.truth().sensor_wrench);
             self.reading_time = self.sensor_ticks as f64 * self.sensor_period;
             self.sensor_ticks += 1;
         }
-        let (q, qd) = self.world.joints();
-        let input = ServoInput {
-            q,
-            qd,
-            wrench: self.reading.wrench,
-            force_valid: self.force_valid,
+        let force = Force {
+            reading: self.reading.wrench,
+            valid: self.force_valid,
         };
-        let tau = self.servo.step(&input, self.dt);
-        self.world.step(tau, self.dt);
-        self.ticks += 1;
-        self.answer_estimator();
+        let step = servo_tick(&mut self.world, &mut self.servo, force, self.dt, before);
+        if step == Step::Ran {
+            self.ticks += 1;
+            self.answer_estimator();
+        }
+        step
     }
 
     /// The estimator board: answers a finished probe run at once (the real stack answers

@@ -2,7 +2,8 @@
 //! cost tuner's once-per-period model minimisation included), and neither does taking the
 //! controller's snapshot, which the servo board does every tick.
 
-use afs_shared::sim::{Lockstep, SimConfig};
+use afs_shared::config::SimConfig;
+use afs_shared::sim::Lockstep;
 use afs_shared::tuner::{CostTunerParams, ThesisTunerParams, TunerConfig};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;

@@ -3,8 +3,9 @@
 //! and the safe state entered from each mode. Driven through the lockstep (plant and sensor in
 //! the loop), with the estimator's answers given by hand.
 
+use afs_shared::config::SimConfig;
 use afs_shared::servo::{ServoCore, ServoMode, Trigger};
-use afs_shared::sim::{Lockstep, SimConfig};
+use afs_shared::sim::Lockstep;
 use afs_shared::tangent::{ReprobeReason, TangentError, TangentOutcome};
 
 /// A lockstep tracking at 5 mm/s with a 3° tangent error; the test answers the estimator.

@@ -34,6 +34,7 @@ fn a_running_stack_serves_clients_and_keeps_its_prefix() {
             .all(|x| x.state == Some(ProcessState::Running)),
         "{processes:?}"
     );
+    the_graph_is_the_stacks(&p);
 
     // A client in another language.
     let py = Command::new("python3")
@@ -181,4 +182,31 @@ fn nodes_seen_by(file: &Path) -> Vec<String> {
     })
     .unwrap();
     seen
+}
+
+/// The picture of `afs graph` (its table, `afs::ipc::graph::EDGES`) against a running stack:
+/// every service the stack has is in the table, every board on it is one the table draws
+/// writing or reading it, and every service the table has in every stack is there.
+fn the_graph_is_the_stacks(prefix: &str) {
+    use afs::ipc::graph::{EDGES, Party, edge_of};
+    let running = afs::ipc::service_nodes(prefix).unwrap();
+    for (service, nodes) in &running {
+        let e = edge_of(service).unwrap_or_else(|| panic!("{service} is not in the graph"));
+        for node in nodes {
+            let Some(party) = Party::ALL.iter().find(|p| p.node() == Some(node.as_str())) else {
+                continue; // a client (afs status), not a board
+            };
+            assert!(
+                e.from.contains(party) || e.to.contains(party),
+                "{node} is on {service}, which the graph does not draw it on"
+            );
+        }
+    }
+    for e in EDGES.iter().filter(|e| !e.optional) {
+        assert!(
+            running.contains_key(e.service),
+            "{} is not in the stack",
+            e.service
+        );
+    }
 }

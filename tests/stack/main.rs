@@ -306,6 +306,8 @@ fn bad_input_is_refused_clearly() {
         afs::stack::DEFAULT_STACK.replace("name = \"sensor\"", "name = \"servo\""),
     )
     .unwrap();
+    let bare = dir.join("bare.toml");
+    std::fs::write(&bare, "[servo]\ninertia_feedforward = false\n").unwrap();
     let missing_bin = dir.join("missing.toml");
     // A board that cannot start fails the run after the prefix was claimed: it is given back.
     let missing_prefix = prefix("nobin");
@@ -370,6 +372,23 @@ fn bad_input_is_refused_clearly() {
             "not found",
         ),
         (
+            vec!["run".into(), "--rate-hz".into(), "0".into()],
+            "--rate-hz 0 must be",
+        ),
+        (
+            vec!["run".into(), "--mjcf".into(), "/nonexistent/arm.xml".into()],
+            "no such model",
+        ),
+        (
+            vec![
+                "experiment".into(),
+                "fig4.1".into(),
+                "--config".into(),
+                bare.display().to_string(),
+            ],
+            "belongs under [sim]",
+        ),
+        (
             vec!["status".into(), "--prefix".into(), prefix("none")],
             "no stack with prefix",
         ),
@@ -419,5 +438,30 @@ fn killed_boards_are_restarted_and_the_world_resumes() {
     // The restarted servo resumed its controller too, and the reference restarted its servo
     // at the same tick: the agreement is one of the run's checks, and it held.
     assert!(check(&r, "lockstep_agreement").pass, "{:#?}", r.agreement);
+    assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
+}
+
+/// `afs run --rate-hz 1000` runs the servo at 1 kHz, as `afs experiment --rate-hz 1000` runs its
+/// lockstep: one flag, one meaning. 2 s, every tick joined, in agreement with the lockstep.
+#[test]
+fn run_takes_the_rate_flag_of_experiment() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let p = prefix("rate");
+    let out = afs()
+        .args(["run", "--rate-hz", "1000", "--duration", "2"])
+        .args(["--json", "--quiet", "--prefix", &p])
+        .output()
+        .unwrap();
+    let r = run_report(&out);
+    assert!(
+        out.status.success() && r.passed,
+        "{}\n{}",
+        String::from_utf8_lossy(&out.stderr),
+        failed(&r)
+    );
+    let l = r.loop_stats.expect("the servo's loop statistics");
+    assert_eq!(l.period_us, 1000.0);
+    assert_eq!(r.stack.ticks, 2000);
+    assert_eq!(r.samples.plant_lost, 0);
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
 }

@@ -7,18 +7,21 @@ use super::ports::Ports;
 use super::timing::{Timing, publish_stats};
 use crate::boards::Startup;
 use crate::ipc;
+use crate::ipc::Svc;
 use crate::{hist, rt};
 use afs_shared::insertion::rig::InsertionRig;
 use afs_shared::msg::{
-    Board, Command, InsertionState, LoopFlags, LoopStats, PlantSample, ServoFlags, ServoSample,
-    WorldSnapshot, WrenchFlags, WrenchSample,
+    Board, Command, InsertionState, LoopFlags, LoopStats, PlantSample, ServoCommand, ServoFlags,
+    ServoSample, WorldSnapshot, WrenchFlags, WrenchSample,
 };
 use afs_shared::scenario::{DriverState, Scenario, ScenarioDriver};
 use afs_shared::sensor::Wrench;
-use afs_shared::servo::{ServoCore, ServoInput, ServoMode};
+use afs_shared::servo::{ServoCore, ServoMode};
+use afs_shared::tick::{Force, Step, servo_tick};
 use afs_shared::watchdog::{GateCounters, GateParams, SampleGate, Verdict};
 use afs_shared::world::{World, WorldStateAny};
 use anyhow::{Context, Result, bail};
+use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -191,19 +194,33 @@ impl ServoBoard {
             return self.tick_peg(now, late);
         }
         self.take_force();
-        let (input, used) = self.input(now);
-        let t = self.plant.time();
-        if self.seq > self.tick_limit
-            || self
-                .driver
-                .step(t, self.plant.truth().surface_u_m, &mut self.servo)
-                == DriverState::Done
-        {
+        let (force, used) = self.input(now);
+        if self.seq > self.tick_limit {
             return Tick::Done;
         }
-        self.take_commands();
-        let tau = self.servo.step(&input, self.dt);
-        self.plant.step(tau, self.dt);
+        // The lockstep's tick routine (`Lockstep::step_with` runs it too): the scenario and the
+        // commands, the controller, the world.
+        let Self {
+            plant,
+            servo,
+            driver,
+            ports,
+            stats,
+            estimate_wanted,
+            dt,
+            ..
+        } = self;
+        let step = servo_tick(plant, servo, force, *dt, |world, servo| {
+            let (t, u) = (world.time(), world.truth().surface_u_m);
+            if driver.step(t, u, servo) == DriverState::Done {
+                return Step::Done;
+            }
+            take_commands(&ports.command, stats, estimate_wanted, servo);
+            Step::Ran
+        });
+        if step == Step::Done {
+            return Tick::Done;
+        }
         if self.servo.is_safe() {
             self.stats.safe_ticks += 1;
         }
@@ -224,19 +241,15 @@ impl ServoBoard {
         .take();
     }
 
-    /// The controller's input from the joints and the newest accepted force sample, and that
-    /// sample with its age (None: none young enough, the safe state's reason noted).
-    fn input(&mut self, now: u64) -> (ServoInput, Option<(WrenchSample, u64)>) {
-        let (q, qd) = self.plant.joints();
-        let mut input = ServoInput {
-            q,
-            qd,
-            ..Default::default()
-        };
+    /// The force the tick uses, from the newest accepted force sample (its tare handed to the
+    /// controller when it changed), and that sample with its age (None: none young enough, the
+    /// safe state's reason noted).
+    fn input(&mut self, now: u64) -> (Force, Option<(WrenchSample, u64)>) {
+        let mut input = Force::default();
         match self.gate.current(now) {
             Ok((w, age)) => {
-                input.wrench = w.wrench();
-                input.force_valid = true;
+                input.reading = w.wrench();
+                input.valid = true;
                 let tare = w.tare();
                 if tare != self.last_tare {
                     self.servo.set_tare(tare);
@@ -253,30 +266,6 @@ impl ServoBoard {
                     self.safe_reason = v as u32;
                 }
                 (input, None)
-            }
-        }
-    }
-
-    /// Commands: a tangent estimate asked for starts once the servo tracks (the lockstep
-    /// reference replays it at the same tick, `Replay::requested`), unless one started since.
-    fn take_commands(&mut self) {
-        while let Ok(Some(c)) = self.ports.command.receive() {
-            let c = *c.payload();
-            self.stats.commands += 1;
-            if c.version == afs_shared::msg::ServoCommand::VERSION
-                && Command::try_from(c.command) == Ok(Command::EstimateTangent)
-            {
-                self.estimate_wanted = Some(c.started_before);
-            } else {
-                self.stats.bad_commands += 1;
-            }
-        }
-        if let Some(before) = self.estimate_wanted {
-            if self.servo.counters().started > before {
-                self.estimate_wanted = None;
-            } else if self.servo.mode() == ServoMode::Track {
-                self.servo.request_tangent_estimate();
-                self.estimate_wanted = None;
             }
         }
     }
@@ -337,17 +326,15 @@ impl ServoBoard {
         }
     }
 
-    /// Wake latency, execution time, misses; every 1000 ticks the statistics, and every 0.1 s
-    /// between requests (at any rate, and never in the statistics' tick) the connections of
-    /// ports that send rarely.
+    /// Every 1000 ticks the statistics, and every 0.1 s between requests (at any rate, and
+    /// never in the statistics' tick) the connections of ports that send rarely; then the
+    /// tick's wake latency, execution time and miss. The execution time runs from the wake
+    /// (`now`, the clock read after the sleep) to the end of these chores: all of the tick's
+    /// own work, so the heaviest ticks show as execution time, not as the next tick's
+    /// lateness (docs/stack.md, *The servo board*). Statistics published in a tick cover the
+    /// ticks before it.
     fn account(&mut self, now: u64, late: u64) {
-        let exec = rt::monotonic_ns().saturating_sub(now);
-        hist::record(&mut self.timing.wake, late);
-        hist::record(&mut self.timing.exec, exec);
         self.stats.ticks += 1;
-        if late >= self.period_ns || exec >= self.period_ns {
-            self.stats.misses += 1;
-        }
         if self.stats.ticks.is_multiple_of(1000) {
             self.publish_stats();
         } else if self.link.is_idle() && self.connections.due(now) {
@@ -356,6 +343,12 @@ impl ServoBoard {
             // port list; with one it maps or unmaps a segment, as the next send would.
             self.link.update_connections();
             self.startup.update_connections();
+        }
+        let exec = rt::monotonic_ns().saturating_sub(now);
+        hist::record(&mut self.timing.wake, late);
+        hist::record(&mut self.timing.exec, exec);
+        if late >= self.period_ns || exec >= self.period_ns {
+            self.stats.misses += 1;
         }
     }
 
@@ -470,9 +463,7 @@ fn controller(
 ) -> Result<(ServoCore, ScenarioDriver)> {
     let cfg = &scenario.cfg;
     let tangent0 = cfg.surface.tangent_angle_at(cfg.start_u_m) + cfg.tangent_error_rad;
-    let mut wrench0 = first.wrench();
-    wrench0.force -= first.tare().force;
-    wrench0.torque -= first.tare().torque;
+    let wrench0 = first.wrench().tared(first.tare());
     let new = |q| {
         ServoCore::new(
             cfg.servo,
@@ -496,4 +487,34 @@ fn controller(
     }
     servo.set_tare(first.tare());
     Ok((servo, driver))
+}
+
+/// Commands: a tangent estimate asked for (`wanted`: the number of estimations started when it
+/// was sent) starts once the servo tracks (the lockstep reference replays it at the same tick,
+/// `Replay::requested`), unless one started since.
+fn take_commands(
+    command: &Subscriber<Svc, ServoCommand, ()>,
+    stats: &mut LoopStats,
+    wanted: &mut Option<u32>,
+    servo: &mut ServoCore,
+) {
+    while let Ok(Some(c)) = command.receive() {
+        let c = *c.payload();
+        stats.commands += 1;
+        if c.version == ServoCommand::VERSION
+            && Command::try_from(c.command) == Ok(Command::EstimateTangent)
+        {
+            *wanted = Some(c.started_before);
+        } else {
+            stats.bad_commands += 1;
+        }
+    }
+    if let Some(before) = *wanted {
+        if servo.counters().started > before {
+            *wanted = None;
+        } else if servo.mode() == ServoMode::Track {
+            servo.request_tangent_estimate();
+            *wanted = None;
+        }
+    }
 }

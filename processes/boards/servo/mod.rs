@@ -21,7 +21,7 @@ mod ports;
 mod timing;
 
 use crate::rt;
-use afs_shared::sim::SimConfig;
+use afs_shared::config::SimConfig;
 use anyhow::Result;
 use board::{ServoBoard, Tick};
 use std::path::PathBuf;

@@ -389,7 +389,7 @@ pub(super) fn stack(opts: &BenchOptions, stop: &AtomicBool) -> Result<StackPart>
     let can_hog = rt::available_cpus() > 1;
     let kinds = [Kind::Plain, Kind::Hog, Kind::Viewer];
     let (sums, viewer_messages) = alternate(opts, stop, &kinds, other, can_hog)?;
-    let sensor_period_us = 1e6 / afs_shared::sim::SimConfig::default().sensor.rate_hz;
+    let sensor_period_us = 1e6 / afs_shared::config::SimConfig::default().sensor.rate_hz;
     let mut series = Vec::new();
     let mut runs = Vec::new();
     for (kind, k) in kinds.into_iter().zip(sums) {

@@ -68,8 +68,9 @@ pub struct ExperimentArgs {
     /// Threads for --seeds (default: one per CPU).
     #[arg(long)]
     pub jobs: Option<usize>,
-    /// TOML file overriding the default set-up (plant, surface, sensor, servo); the
-    /// experiment's own settings apply on top.
+    /// A stack file whose `[sim]` table overrides the default set-up (plant, surface, sensor,
+    /// servo, world, insertion), the same file `afs run --config` takes; the experiment's own
+    /// settings apply on top.
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// The rig: `afs` (decoupled operating point, inverse-dynamics and preload feedforward) or
@@ -182,7 +183,7 @@ pub fn command(a: &ExperimentArgs, stop: &AtomicBool) -> Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     }
     let mut base = match &a.config {
-        Some(path) => crate::boards::load_config(path)?,
+        Some(path) => crate::stack::setup_of(path)?,
         None => Default::default(),
     };
     let rig = Rig::parse(&a.rig).unwrap_or_default();

@@ -2,9 +2,10 @@
 //! `fig5.3` (the preliminary correlation method on it).
 
 use super::*;
+use crate::config::SimConfig;
 use crate::error::ExperimentError;
 use crate::setups::on_corner_profile;
-use crate::sim::{Lockstep, SimConfig};
+use crate::sim::Lockstep;
 use crate::tuner::TunerConfig;
 use serde::Serialize;
 

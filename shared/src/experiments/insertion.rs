@@ -60,13 +60,7 @@ pub fn insertion(opts: &Options) -> Result<Outcome<InsertionSummary>, Experiment
             reading = sensor.sample(rig.sensor_wrench()).wrench;
             next_sample += period;
         }
-        rig.step(
-            Some(Wrench {
-                force: reading.force - tare.force,
-                torque: reading.torque - tare.torque,
-            }),
-            dt,
-        );
+        rig.step(Some(reading.tared(tare)), dt);
         monitor.push(&PegTick {
             t: rig.time_s(),
             phase: rig.phase(),

@@ -31,8 +31,8 @@ pub use tracking::*;
 pub use tuning::*;
 
 pub use crate::check::Check;
+use crate::config::SimConfig;
 use crate::error::ExperimentError;
-use crate::sim::SimConfig;
 use crate::tuner::TunerConfig;
 use serde::Serialize;
 

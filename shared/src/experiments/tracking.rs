@@ -1,9 +1,10 @@
 //! Chapter 5 experiments: tangent estimation by dither, surface tracking, corners.
 
 use super::*;
+use crate::config::SimConfig;
 use crate::error::ExperimentError;
 use crate::friction::FrictionLaw;
-use crate::sim::{EstimateLog, Lockstep, SimConfig};
+use crate::sim::{EstimateLog, Lockstep};
 use crate::tangent::TangentOutcome;
 use crate::tuner::TunerConfig;
 use serde::Serialize;

@@ -2,8 +2,9 @@
 //! Aω = 0.2 ẋ_o (fig. 4.8), and slow tuning as Aω passes ẋ_o (figs. 4.9, 4.10).
 
 use super::*;
+use crate::config::SimConfig;
 use crate::error::ExperimentError;
-use crate::sim::{Lockstep, SimConfig};
+use crate::sim::Lockstep;
 use crate::ticks::{Tick, decimate, run_recording, sliding_periods, window};
 use crate::tuner::{CostTunerParams, ThesisTunerParams, TunerConfig, TunerReport};
 use serde::Serialize;

@@ -218,7 +218,8 @@ pub fn probe_two_point(
             reading = sensor.sample(w).wrench;
             next += period;
         }
-        (reading.force - tare.force, reading.torque - tare.torque)
+        let tared = reading.tared(tare);
+        (tared.force, tared.torque)
     });
     Some(TwoPointProbe {
         truth,

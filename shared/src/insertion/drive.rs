@@ -10,40 +10,14 @@
 //! The wrist's reaction (force at the flange's compliance centre, a point on the wrist link,
 //! and a pure moment) enters the joints as `J_pᵀ f + m (1, 1, 1)`.
 
+pub use super::options::Drive;
 use super::plant::Flange;
 use super::scara::{Scara, WristParams};
 use crate::arm::{ArmParams, Elbow, PidGains, tune_pid_for_bandwidth};
 use crate::error::ConfigError;
 use crate::math::{Vec2, wrap_angle};
 use nalgebra::{Matrix3, Vector3};
-use serde::{Deserialize, Serialize};
 use std::f64::consts::FRAC_PI_2;
-
-/// What positions the wrist's flange.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Drive {
-    /// An ideal position-controlled arm: the flange is exactly where the controller commands.
-    #[default]
-    Ideal,
-    /// The three-joint arm with its dynamics under its joint servos.
-    Arm,
-}
-
-impl Drive {
-    /// Its name in a set-up and on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Ideal => "ideal",
-            Self::Arm => "arm",
-        }
-    }
-
-    /// The drive called `s`.
-    pub fn parse(s: &str) -> Option<Self> {
-        [Self::Ideal, Self::Arm].into_iter().find(|d| d.name() == s)
-    }
-}
 
 /// The arm and its servo.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -14,6 +14,7 @@ pub mod estimate;
 pub mod face;
 pub mod geometry;
 pub mod monitor;
+pub mod options;
 pub mod plant;
 pub mod rig;
 pub mod scara;

@@ -1,4 +1,5 @@
 use super::*;
+use crate::insertion::controller::{ControllerParams, Method};
 use crate::math::Vec2;
 
 /// A rig restored from another's state mid-insertion carries on bit for bit as that one

@@ -3,12 +3,9 @@
 //! chosen by the set-up's `[world] kind` (`afs experiment insertion --plant mujoco`).
 
 use super::plant::{Commanded, Flange, PegParams, PegPlant, PegPlantState, PegTruth};
+use crate::config::{WorldConfig, WorldKind};
 use crate::error::ConfigError;
-use crate::world::{WorldConfig, WorldKind};
-
-/// The length of MuJoCo's peg state (`mj_getState`: time, three joints, their rates, the
-/// solver's warm start of three).
-pub const MUJOCO_PEG_STATE_LEN: usize = 10;
+pub use crate::world::MUJOCO_PEG_STATE_LEN;
 
 /// The peg's world. The built-in plant stays inline (the servo's fast loop steps it); MuJoCo's
 /// is boxed, being only a handle and its buffers.

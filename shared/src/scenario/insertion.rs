@@ -2,6 +2,7 @@
 //! ([`InsertionRig`]), with the sensor model sampled on simulated time, tick by tick as the
 //! stack numbers them, through the stack's force-invalid ticks.
 
+use super::report::InvalidTicks;
 use super::{Replay, Scenario, ScenarioReport};
 use crate::error::{ConfigError, ScenarioError};
 use crate::insertion::rig::InsertionRig;
@@ -33,8 +34,7 @@ pub(super) fn run(
     let mut monitor = scenario.monitor();
     let limit = (duration_s.min(scenario.natural_duration_s) / dt).round() as u64;
     let (mut reading, mut next_sample, period) = (Wrench::default(), 0.0, 1.0 / cfg.sensor.rate_hz);
-    let invalid = replay.force_invalid;
-    let mut next = 0;
+    let mut invalid = InvalidTicks::new(replay.force_invalid);
     for seq in 1..=limit {
         if rig.failed() {
             break;
@@ -43,14 +43,8 @@ pub(super) fn run(
             reading = sensor.sample(rig.sensor_wrench()).wrench;
             next_sample += period;
         }
-        while next < invalid.len() && invalid[next].first + invalid[next].len <= seq {
-            next += 1;
-        }
-        let valid = !invalid.get(next).is_some_and(|r| r.contains(seq));
-        let used = valid.then(|| Wrench {
-            force: reading.force - zero.force,
-            torque: reading.torque - zero.torque,
-        });
+        let valid = invalid.valid(seq);
+        let used = valid.then(|| reading.tared(zero));
         rig.step(used, dt);
         monitor.push(
             &PlantSample::of_peg(&rig, seq, 0),
@@ -65,8 +59,8 @@ pub(super) fn run(
 mod tests {
     use super::super::{Scenario, TickRange, run_lockstep, run_lockstep_replay};
     use super::*;
+    use crate::config::SimConfig;
     use crate::experiments::{Options, insertion};
-    use crate::sim::SimConfig;
 
     /// The scenario's lockstep is `afs experiment insertion` at the same seed, figure for
     /// figure: one rig, one sensor model, one monitor.

@@ -17,11 +17,11 @@ mod report;
 pub use reference::*;
 pub use report::*;
 
+use crate::config::SimConfig;
 use crate::error::{ConfigError, ScenarioError, UnknownName};
 use crate::insertion::rig::InsertionOptions;
 use crate::servo::ServoCore;
 use crate::setups::on_corner_profile;
-use crate::sim::SimConfig;
 use crate::surface::{Shape, Surface, SurfaceFrame};
 use crate::tuner::{CostTunerParams, TunerConfig};
 use serde::Serialize;

@@ -1,11 +1,13 @@
 //! The lockstep reference of a scenario, replaying a real-time run's events, and the
 //! comparison of the two.
 
+use super::report::InvalidTicks;
 use super::{DriverState, Scenario, ScenarioKind, ScenarioReport, TickRange};
 use crate::error::ScenarioError;
 use crate::insertion::monitor::InsertionRun;
 use crate::msg::{PlantSample, ServoFlags, ServoSample};
 use crate::sim::Lockstep;
+use crate::tick::Step;
 use serde::{Deserialize, Serialize};
 
 /// Runs `scenario` for `duration_s` (or to its end) in the lockstep simulation: the reference
@@ -42,32 +44,35 @@ pub fn run_lockstep_replay(
     if scenario.kind == ScenarioKind::Insertion {
         return super::insertion::run(scenario, duration_s, replay);
     }
-    let invalid = replay.force_invalid;
+    let mut invalid = InvalidTicks::new(replay.force_invalid);
     let mut sim = Lockstep::new(&scenario.cfg)?;
     let mut driver = scenario.driver();
     let mut monitor = scenario.monitor();
     let dt = sim.dt();
     let limit = (duration_s.min(scenario.natural_duration_s) / dt).round() as u64;
-    let mut next = 0;
     for seq in 1..=limit {
-        let t = (seq - 1) as f64 * dt;
-        let u = sim.truth().surface_u_m;
         if replay.servo_restarts.binary_search(&seq).is_ok() {
             sim.restart_servo()
                 .map_err(|reason| ScenarioError::Restart { tick: seq, reason })?;
         }
-        if driver.step(t, u, sim.servo_mut()) == DriverState::Done {
+        let valid = invalid.valid(seq);
+        sim.set_force_valid(valid);
+        let requested = replay.requested.binary_search(&seq).is_ok();
+        // The servo board's tick: the scenario at the world's time, the stack's command at the
+        // tick it started, the controller, the world.
+        let step = sim.step_with(|world, servo| {
+            let (t, u) = (world.time(), world.truth().surface_u_m);
+            if driver.step(t, u, servo) == DriverState::Done {
+                return Step::Done;
+            }
+            if requested {
+                servo.request_tangent_estimate();
+            }
+            Step::Ran
+        });
+        if step == Step::Done {
             break;
         }
-        while next < invalid.len() && invalid[next].first + invalid[next].len <= seq {
-            next += 1;
-        }
-        let valid = !invalid.get(next).is_some_and(|r| r.contains(seq));
-        sim.set_force_valid(valid);
-        if replay.requested.binary_search(&seq).is_ok() {
-            sim.servo_mut().request_tangent_estimate();
-        }
-        sim.step();
         let p = PlantSample::of_tick(sim.truth(), seq, 0);
         let mut s = ServoSample::of_tick(sim.servo(), seq, 0, sim.time());
         if valid {
@@ -245,7 +250,7 @@ pub const CLASSIFICATION_TOLERANCE: f64 = 0.04;
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::SimConfig;
+    use crate::config::SimConfig;
 
     /// The tangent error is compared once an estimate has completed in either run; before, it
     /// is how far the tool went (0.10° against 0.60° in a CI run with the sensor killed

@@ -68,6 +68,33 @@ impl TickRange {
     }
 }
 
+/// A run's force-invalid tick ranges walked in tick order: the one place a lockstep reference
+/// asks whether the stack could use its force data at a tick.
+#[derive(Debug, Clone, Copy)]
+pub struct InvalidTicks<'a> {
+    ranges: &'a [TickRange],
+    next: usize,
+}
+
+impl<'a> InvalidTicks<'a> {
+    /// Over `ranges`, in order (as [`ScenarioMonitor::replay`] gives them).
+    pub fn new(ranges: &'a [TickRange]) -> Self {
+        Self { ranges, next: 0 }
+    }
+
+    /// Whether the force data of tick `seq` was valid; ticks are asked in increasing order.
+    pub fn valid(&mut self, seq: u64) -> bool {
+        while self
+            .ranges
+            .get(self.next)
+            .is_some_and(|r| r.first + r.len <= seq)
+        {
+            self.next += 1;
+        }
+        !self.ranges.get(self.next).is_some_and(|r| r.contains(seq))
+    }
+}
+
 /// Most force-invalid tick ranges a monitor keeps (later ones are merged into the last).
 const MAX_INVALID_RANGES: usize = 100_000;
 

@@ -346,10 +346,7 @@ impl ServoCore {
             && inp.wrench.force.y.is_finite()
             && inp.wrench.torque.is_finite();
         let pose = self.arm.pose(inp.q);
-        let wrench = Wrench {
-            force: inp.wrench.force - self.tare.force,
-            torque: inp.wrench.torque - self.tare.torque,
-        };
+        let wrench = inp.wrench.tared(self.tare);
         let force = if valid {
             Self::to_world_at(&pose, wrench)
         } else {

@@ -1,9 +1,9 @@
 //! The world of §5.4's box (fig. 5.9), chosen by the same configuration as the arm's: afs's own
 //! [`BoxPlant`] or the same box in MuJoCo ([`MujocoBox`](super::MujocoBox), docs/mujoco.md).
 
+use crate::config::SimConfig;
 use crate::error::ConfigError;
 use crate::multicontact::{BoxParams, BoxPlant, BoxTruth, Pose};
-use crate::sim::SimConfig;
 
 use super::WorldKind;
 

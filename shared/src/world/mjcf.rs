@@ -22,7 +22,7 @@
 
 use super::MujocoParams;
 use crate::arm::ArmParams;
-use crate::sim::SimConfig;
+use crate::config::SimConfig;
 use crate::surface::{Shape, Surface};
 use std::fmt::Write;
 

@@ -34,147 +34,12 @@ pub use mujoco_box::MujocoBox;
 pub use mujoco_peg::MujocoPeg;
 
 use crate::arm::Arm;
+use crate::config::SimConfig;
+pub use crate::config::{MujocoParams, WorldConfig, WorldKind};
 use crate::error::ConfigError;
 use crate::plant::{Plant, PlantParams, PlantState, PlantTruth};
-use crate::sim::SimConfig;
 use crate::surface::Surface;
 use nalgebra::Vector2;
-use serde::{Deserialize, Serialize};
-
-/// Which world the servo drives.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum WorldKind {
-    /// afs's own plant (docs/model.md).
-    #[default]
-    Builtin,
-    /// MuJoCo, on a model afs generates from the set-up or on the user's own (docs/mujoco.md).
-    Mujoco,
-}
-
-impl WorldKind {
-    /// Its name in configuration and on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            WorldKind::Builtin => "builtin",
-            WorldKind::Mujoco => "mujoco",
-        }
-    }
-
-    /// The kind named `s` (`builtin`, `mujoco`).
-    pub fn parse(s: &str) -> Result<Self, ConfigError> {
-        match s {
-            "builtin" => Ok(WorldKind::Builtin),
-            "mujoco" => Ok(WorldKind::Mujoco),
-            _ => Err(ConfigError::rule(
-                "world.kind",
-                format!("is `{s}`; use `builtin` or `mujoco`"),
-            )),
-        }
-    }
-}
-
-/// The MuJoCo model's settings (generated models; a user's model keeps its own contact).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct MujocoParams {
-    /// Radius of the tool's contact sphere (m); the surface geoms sit this far inside the
-    /// surface, so the sphere touches when the tool tip reaches it.
-    pub tool_radius_m: f64,
-    /// Constraint impedance d (solimp's dmin = dmax): with solref's direct form set from it,
-    /// the static contact stiffness is the set-up's k_e whatever d (docs/mujoco.md).
-    pub impedance: f64,
-    /// Ratio of frictional to normal impedance (MuJoCo's `impratio`): the larger, the less the
-    /// tool creeps under a tangential force inside the friction cone.
-    pub impratio: f64,
-    /// The damping of the friction directions (N·s/m, solreffriction's direct form): below the
-    /// cone, MuJoCo's friction resists sliding like this damper; the larger, the closer to
-    /// stick (docs/mujoco.md).
-    pub friction_damping_n_s_per_m: f64,
-    /// Iterations of MuJoCo's noslip post-solver (0: off), which removes the friction
-    /// directions' slip that the soft model allows.
-    pub noslip_iterations: u32,
-    /// MuJoCo's pyramidal friction cone instead of the elliptic one.
-    pub pyramidal: bool,
-    /// Add eq. 4.5's Stribeck and viscous terms as applied forces on the tool, beside MuJoCo's
-    /// Coulomb cone (false: MuJoCo's friction alone).
-    pub applied_friction: bool,
-    /// Half the length of the generated surface along its base tangent (m).
-    pub surface_half_length_m: f64,
-}
-
-impl Default for MujocoParams {
-    fn default() -> Self {
-        Self {
-            tool_radius_m: 0.5e-3,
-            impedance: 0.01,
-            impratio: 1e5,
-            friction_damping_n_s_per_m: 5.0,
-            pyramidal: false,
-            noslip_iterations: 0,
-            applied_friction: false,
-            surface_half_length_m: 0.25,
-        }
-    }
-}
-
-impl MujocoParams {
-    /// Checks every setting; the message names it.
-    pub fn validate(&self) -> Result<(), ConfigError> {
-        let positive = [
-            ("world.mujoco.tool_radius_m", self.tool_radius_m),
-            ("world.mujoco.impratio", self.impratio),
-            (
-                "world.mujoco.friction_damping_n_s_per_m",
-                self.friction_damping_n_s_per_m,
-            ),
-            (
-                "world.mujoco.surface_half_length_m",
-                self.surface_half_length_m,
-            ),
-        ];
-        for (name, v) in positive {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(ConfigError::setting(name, v, "must be > 0"));
-            }
-        }
-        if !(self.impedance > 0.0 && self.impedance < 1.0) {
-            return Err(ConfigError::setting(
-                "world.mujoco.impedance",
-                self.impedance,
-                "must lie strictly between 0 and 1",
-            ));
-        }
-        Ok(())
-    }
-}
-
-/// Which world, and how it is built.
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct WorldConfig {
-    /// builtin or mujoco.
-    pub kind: WorldKind,
-    /// A user's MJCF file (mujoco only): a planar arm with two hinge joints, a site named
-    /// `tool` and a body named `surface`. None: afs generates the model from the set-up.
-    pub mjcf: Option<String>,
-    /// The generated MuJoCo model's settings.
-    pub mujoco: MujocoParams,
-}
-
-impl WorldConfig {
-    /// Checks the settings.
-    pub fn validate(&self) -> Result<(), ConfigError> {
-        self.mujoco.validate()?;
-        if self.mjcf.is_some() && self.kind != WorldKind::Mujoco {
-            return Err(ConfigError::rule(
-                "world.mjcf",
-                "is a MuJoCo model; set world.kind = \"mujoco\" (or --plant mujoco) with it",
-            ));
-        }
-        Ok(())
-    }
-}
 
 /// The set-up as its world sees it. With a user's MJCF (`world.mjcf`) the arm is read from
 /// the model ([`ArmParams`](crate::arm::ArmParams) replaced, the tool's mass beyond the sensor
@@ -383,6 +248,10 @@ pub enum WorldStateAny {
     /// MuJoCo's integration state (time, joints, warm start, mocap), `len` values used.
     Mujoco(MujocoState),
 }
+
+/// The length of MuJoCo's peg state (`mj_getState`: time, three joints, their rates, the
+/// solver's warm start of three).
+pub const MUJOCO_PEG_STATE_LEN: usize = 10;
 
 /// The most values a MuJoCo state may have here (a planar arm: two joints, one mocap body).
 pub const MUJOCO_STATE_LEN: usize = 32;

@@ -4,13 +4,13 @@
 //! forces. Allocation-free per step.
 
 use super::mjcf::{self, names};
-use super::mujoco_body::contacts_on;
+use super::mujoco_body::{contacts_on, load};
 use super::{MUJOCO_STATE_LEN, MujocoState};
 use crate::arm::Arm;
+use crate::config::SimConfig;
 use crate::error::ConfigError;
 use crate::math::Vec2;
 use crate::plant::{PlantParams, PlantTruth, sensor_wrench};
-use crate::sim::SimConfig;
 use crate::surface::{Shape, Surface, closest_on_sinusoid};
 use mujoco_rs::mujoco_c::mjtState;
 use mujoco_rs::prelude::MjtObjBase as mjtObj;
@@ -102,11 +102,6 @@ pub(super) fn positive_time(what: &str, seconds: f64) -> Result<(), ConfigError>
             format!("is {seconds} s; give a positive time"),
         ))
     }
-}
-
-pub(super) fn load(xml: &str) -> Result<MjModel, ConfigError> {
-    MjModel::from_xml_string(xml)
-        .map_err(|e| ConfigError::rule("world (MuJoCo)", format!("the model did not load: {e}")))
 }
 
 fn id(model: &MjModel, kind: mjtObj, name: &str, what: &str) -> Result<usize, ConfigError> {
@@ -506,7 +501,8 @@ mod tests {
 /// `cargo test --release -p afs-shared --features mujoco friction_under_dither -- --ignored --nocapture`
 #[cfg(test)]
 mod diagnostics {
-    use crate::sim::{Lockstep, SimConfig};
+    use crate::config::SimConfig;
+    use crate::sim::Lockstep;
     use crate::world::WorldKind;
 
     /// The normal force's range and the mean friction over 0.1 s (one dither period) of the

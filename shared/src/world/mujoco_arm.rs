@@ -11,7 +11,8 @@
 //! constraint to warm-start), which the drive's snapshot already carries.
 
 use super::mjcf;
-use super::mujoco::{install_log_handler, load, positive_time};
+use super::mujoco::{install_log_handler, positive_time};
+use super::mujoco_body::load;
 use crate::arm::ArmParams;
 use crate::error::ConfigError;
 use crate::insertion::scara::WristParams;

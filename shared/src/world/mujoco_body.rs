@@ -4,12 +4,17 @@
 
 use super::MujocoParams;
 use super::mjcf::contact_solrefs;
-use super::mujoco::load;
 use crate::error::ConfigError;
 use crate::math::Vec2;
 use mujoco_rs::prelude::MjtObjBase as mjtObj;
 use mujoco_rs::prelude::{MjData, MjModel};
 use std::sync::Arc;
+
+/// MuJoCo's model of the MJCF text `xml`, or why it did not load.
+pub(super) fn load(xml: &str) -> Result<MjModel, ConfigError> {
+    MjModel::from_xml_string(xml)
+        .map_err(|e| ConfigError::rule("world (MuJoCo)", format!("the model did not load: {e}")))
+}
 
 /// The model `generate` writes, with solver references (normal, friction) that give each
 /// contact of the body `name` the stiffness (N/m) and damping (N·s/m) asked for: compiled once

@@ -15,6 +15,7 @@
 //! The truth's contact state is afs's classification ([`truth_at`]) of the part's features at
 //! MuJoCo's pose, with MuJoCo's normal force at each vertex.
 
+use super::MUJOCO_PEG_STATE_LEN;
 use super::MujocoParams;
 use super::mujoco::{install_log_handler, positive_time};
 use super::mujoco_body::{contacts_on, with_contact_stiffness};
@@ -23,7 +24,6 @@ use crate::insertion::geometry::{Contact, Profile, contacts, peg_axes};
 use crate::insertion::plant::{
     Flange, PegParams, PegTruth, SLOTS, stiffest_contact_mode, tip_of, truth_at, wrist_wrench,
 };
-use crate::insertion::world::MUJOCO_PEG_STATE_LEN;
 use crate::math::{Vec2, cross};
 use mujoco_rs::mujoco_c::mjtState;
 use mujoco_rs::prelude::MjtObjBase as mjtObj;

@@ -6,7 +6,7 @@
 #[cfg(test)]
 mod tests {
     use super::super::mjcf;
-    use super::super::mujoco::load;
+    use super::super::mujoco_body::load;
     use crate::arm::ArmParams;
     use crate::insertion::scara::{Scara, WristParams};
     use mujoco_rs::prelude::MjData;

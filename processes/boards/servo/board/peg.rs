@@ -50,10 +50,7 @@ impl ServoBoard {
             return Tick::Done;
         }
         self.drain_commands();
-        let reading = used.map(|(w, _)| Wrench {
-            force: w.wrench().force - w.tare().force,
-            torque: w.wrench().torque - w.tare().torque,
-        });
+        let reading = used.map(|(w, _)| w.wrench().tared(w.tare()));
         if let Some(rig) = &mut self.peg {
             rig.step(reading, self.dt);
         }
