@@ -16,6 +16,8 @@ pub const PLAIN_EVERY: Duration = Duration::from_secs(5);
 /// Runs done of a known total, shared by the threads that do them.
 pub struct Progress {
     what: String,
+    /// What is counted: "runs", "parts".
+    unit: &'static str,
     total: u64,
     bar: Option<ProgressBar>,
     state: Mutex<State>,
@@ -35,19 +37,24 @@ impl Progress {
     /// `total` runs of `what` (e.g. "fig5.6 over seeds 1..=100"): a bar where stderr is a
     /// terminal, plain lines every [`PLAIN_EVERY`] otherwise.
     pub fn new(what: &str, total: u64) -> Self {
-        let on_terminal = std::io::stderr().is_terminal();
-        Self::with_bar(what, total, on_terminal)
+        Self::counting(what, total, "runs")
     }
 
-    /// [`Self::new`] with the choice of the bar made by the caller.
-    pub fn with_bar(what: &str, total: u64, bar: bool) -> Self {
+    /// [`Self::new`] counting `unit` ("parts" of a benchmark) instead of runs.
+    pub fn counting(what: &str, total: u64, unit: &'static str) -> Self {
+        let on_terminal = std::io::stderr().is_terminal();
+        Self::with_bar(what, total, unit, on_terminal)
+    }
+
+    /// [`Self::counting`] with the choice of the bar made by the caller.
+    pub fn with_bar(what: &str, total: u64, unit: &'static str, bar: bool) -> Self {
         let now = Instant::now();
         let bar = bar.then(|| {
             let b = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());
             // The template is a constant; a bad one would be a bug caught by the tests.
-            if let Ok(style) = ProgressStyle::with_template(
-                "{prefix} [{bar:30}] {pos}/{len} runs, {per_sec}, {eta} left {msg}",
-            ) {
+            if let Ok(style) = ProgressStyle::with_template(&format!(
+                "{{prefix}} [{{bar:30}}] {{pos}}/{{len}} {unit}, {{elapsed}}, {{eta}} left {{msg}}"
+            )) {
                 b.set_style(style.progress_chars("=> "));
             }
             b.set_prefix(what.to_string());
@@ -57,6 +64,7 @@ impl Progress {
         });
         Self {
             what: what.to_string(),
+            unit,
             total,
             bar,
             state: Mutex::new(State {
@@ -68,8 +76,8 @@ impl Progress {
         }
     }
 
-    /// One run done with its checks: counted, its failed checks tallied, the bar or the plain
-    /// line brought up to date.
+    /// One run (or part) done with its checks: counted, its failed checks tallied, the bar or
+    /// the plain line brought up to date.
     pub fn run_done(&self, checks: &[Check]) {
         let mut s = self.state.lock().unwrap_or_else(|e| e.into_inner());
         s.done += 1;
@@ -116,8 +124,9 @@ impl Progress {
         } else {
             "time left unknown".to_string()
         };
+        let unit = self.unit;
         format!(
-            "afs: {}: {}/{} runs, {rate:.1} runs/s, {left}; {}",
+            "afs: {}: {}/{} {unit}, {rate:.1} {unit}/s, {left}; {}",
             self.what,
             s.done,
             self.total,
@@ -167,7 +176,7 @@ mod tests {
     /// the time left from the rate; the failures are those of the runs reported.
     #[test]
     fn the_plain_line_counts_runs_and_failures_by_check() {
-        let p = Progress::with_bar("fig5.6 over seeds 1..=4", 4, false);
+        let p = Progress::with_bar("fig5.6 over seeds 1..=4", 4, "runs", false);
         p.run_done(&[check("tangent_error", true), check("peak_force", false)]);
         p.run_done(&[check("tangent_error", false), check("peak_force", false)]);
         assert_eq!(p.done(), 2);
@@ -190,7 +199,7 @@ mod tests {
     /// A run without a failure leaves the tally empty, and the line says so.
     #[test]
     fn no_failure_is_said_as_such() {
-        let p = Progress::with_bar("x", 1, false);
+        let p = Progress::with_bar("x", 1, "runs", false);
         p.run_done(&[check("a", true)]);
         let line = p.line(&p.state.lock().unwrap());
         assert!(line.ends_with("no check failed"), "{line}");

@@ -447,18 +447,8 @@ fn killed_boards_are_restarted_and_the_world_resumes() {
 fn run_takes_the_rate_flag_of_experiment() {
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let p = prefix("rate");
-    let out = afs()
-        .args(["run", "--rate-hz", "1000", "--duration", "2"])
-        .args(["--json", "--quiet", "--prefix", &p])
-        .output()
-        .unwrap();
-    let r = run_report(&out);
-    assert!(
-        out.status.success() && r.passed,
-        "{}\n{}",
-        String::from_utf8_lossy(&out.stderr),
-        failed(&r)
-    );
+    let run = start_run(&p, &["--rate-hz", "1000", "--duration", "2"]);
+    let r = finish_passed(run.take(), "afs run --rate-hz 1000");
     let l = r.loop_stats.expect("the servo's loop statistics");
     assert_eq!(l.period_us, 1000.0);
     assert_eq!(r.stack.ticks, 2000);

@@ -35,6 +35,7 @@ mod world;
 pub use transport::peer;
 
 use crate::hist::{self, QuantilesUs, Summary};
+use crate::tools::progress::Progress;
 use crate::{ipc, rt};
 use afs_shared::check::Check;
 use anyhow::{Context, Result, bail};
@@ -228,26 +229,33 @@ pub fn run(opts: &BenchOptions, stop: &AtomicBool) -> Result<BenchReport> {
         .with_context(|| format!("creating {}", opts.out.display()))?;
     let t0 = Instant::now();
     let stopped = || stop.load(Ordering::Relaxed);
+    let parts = [Part::Hop, Part::Loop, Part::Stack, Part::Link, Part::World];
+    let progress = Progress::counting(
+        &format!("afs bench {}", opts.part.name()),
+        parts.iter().filter(|&&p| opts.part.includes(p)).count() as u64,
+        "parts",
+    );
     let hop = match opts.part.includes(Part::Hop) {
-        true => Some(hop::hop(opts, stop)?),
+        true => Some(done(&progress, hop::hop(opts, stop)?)),
         false => None,
     };
     let loop_part = match opts.part.includes(Part::Loop) && !stopped() {
-        true => Some(stack::jitter(opts, stop)?),
+        true => Some(done(&progress, stack::jitter(opts, stop)?)),
         false => None,
     };
     let stack = match opts.part.includes(Part::Stack) && !stopped() {
-        true => Some(stack::stack(opts, stop)?),
+        true => Some(done(&progress, stack::stack(opts, stop)?)),
         false => None,
     };
     let link = match opts.part.includes(Part::Link) && !stopped() {
-        true => Some(link::link(opts, stop)?),
+        true => Some(done(&progress, link::link(opts, stop)?)),
         false => None,
     };
     let world = match opts.part.includes(Part::World) && !stopped() {
-        true => Some(world::world_part(opts, stop)?),
+        true => Some(done(&progress, world::world_part(opts, stop)?)),
         false => None,
     };
+    progress.finish();
     Ok(BenchReport {
         bench: opts.part.name().into(),
         duration_s: opts.duration_s,
@@ -263,6 +271,17 @@ pub fn run(opts: &BenchOptions, stop: &AtomicBool) -> Result<BenchReport> {
         wall_s: t0.elapsed().as_secs_f64(),
         interrupted: stopped(),
     })
+}
+
+/// A part done: counted in `progress`, its target checks tallied (read from its report, which
+/// every part gives a `targets` list).
+fn done<T: Serialize>(progress: &Progress, part: T) -> T {
+    let targets: Vec<Check> = serde_json::to_value(&part)
+        .ok()
+        .and_then(|v| serde_json::from_value(v["targets"].clone()).ok())
+        .unwrap_or_default();
+    progress.run_done(&targets);
+    part
 }
 
 /// A measured series.
