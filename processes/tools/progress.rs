@@ -53,7 +53,7 @@ impl Progress {
             let b = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());
             // The template is a constant; a bad one would be a bug caught by the tests.
             if let Ok(style) = ProgressStyle::with_template(&format!(
-                "{{prefix}} [{{bar:30}}] {{pos}}/{{len}} {unit}, {{elapsed}}, {{eta}} left {{msg}}"
+                "{{prefix}} [{{bar:30}}] {{pos}}/{{len}} {unit}, {{per_sec}}, {{eta}} left {{msg}}"
             )) {
                 b.set_style(style.progress_chars("=> "));
             }
