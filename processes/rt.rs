@@ -175,29 +175,28 @@ pub fn setup(priority: u8, lock_memory: bool, cpu: Option<usize>) -> RtReport {
     r
 }
 
-/// Where this user may not run at SCHED_FIFO, moves the calling thread (and the threads it
-/// starts from then on) to SCHED_IDLE and says so: the servo and the sensor, refused SCHED_FIFO
-/// too, then run at normal priority beside it, and the scheduler hands the CPU to a waking
-/// normal thread at once when an idle-class one holds it (at nice 10 it did not: with host B's
-/// link board, recorder and estimator at nice 10 the servo's wake p99 was still 1.7 ms). The
-/// boards that are not real-time (the estimator, the link board) call it at start; they get
-/// every CPU cycle the real-time boards leave. None where SCHED_FIFO is permitted: the
+/// Where this user may not run at SCHED_FIFO, lowers the calling thread (and the threads it
+/// starts from then on) to nice 10 and says so: the servo and the sensor, refused SCHED_FIFO
+/// too, then run at nice 0 beside it, and the normal scheduler weighs them about ten times as
+/// heavily (its weights for nice 0 and 10 are 1024 and 110). Not SCHED_IDLE, which favours
+/// them further but starves: the estimator pinned beside `afs bench`'s CPU hog at SCHED_IDLE
+/// got no CPU to close down, and left its files. The boards that are not real-time (the
+/// estimator, the link board) call it at start. None where SCHED_FIFO is permitted: the
 /// real-time boards then outrank everything at normal priority anyway.
 pub fn make_way_for_realtime() -> Option<String> {
     if fifo_permitted() {
         return None;
     }
-    let param = libc::sched_param { sched_priority: 0 };
-    // SAFETY: plain syscall on the calling thread (tid 0) with a valid sched_param.
-    let rc = unsafe { libc::sched_setscheduler(0, libc::SCHED_IDLE, &param) };
+    // SAFETY: setpriority on the calling thread (who 0) with a plain integer.
+    let rc = unsafe { libc::setpriority(libc::PRIO_PROCESS, 0, 10) };
     Some(if rc == 0 {
         "SCHED_FIFO is refused here, so the real-time boards run at normal priority: this \
-         process runs at SCHED_IDLE to leave them the CPU"
+         process runs at nice 10 to leave them the CPU"
             .into()
     } else {
         format!(
-            "SCHED_FIFO is refused here and SCHED_IDLE too ({}); this process competes with \
-             the real-time boards",
+            "SCHED_FIFO is refused here and nice 10 too ({}); this process competes with the \
+             real-time boards",
             io::Error::last_os_error()
         )
     })
