@@ -87,8 +87,10 @@ pub struct Proc {
     streak: u32,
     /// When the current process's data started to flow.
     pub data_since: Option<Instant>,
-    /// Frozen on purpose by the fault injector: no stall policy.
+    /// Frozen on purpose by the fault injector: no stall policy ([`Proc::hold`]).
     pub held: bool,
+    /// When the injector last let it go: its silence counts from there.
+    released: Option<Instant>,
     /// Restarts that injected faults cost, not held against `max_restarts`.
     pub injected_budget: u32,
     /// Monotonic time of the first spawn (ns), and that start's timeline.
@@ -127,6 +129,7 @@ impl Proc {
             streak: 0,
             data_since: None,
             held: false,
+            released: None,
             injected_budget: 0,
             first_spawn_ns: 0,
             first_start: Timeline::default(),
@@ -168,6 +171,7 @@ impl Proc {
         self.state = ProcessState::Running;
         self.started = Instant::now();
         self.held = false;
+        self.released = None;
         self.data_since = None;
         match self.restarting() {
             Some(e) => {
@@ -347,13 +351,22 @@ impl Proc {
         }
     }
 
+    /// Holds it (frozen on purpose by the fault injector: no stall policy) or lets it go at
+    /// `now` (its stall limit then counts from `now`).
+    pub fn hold(&mut self, held: bool, now: Instant) {
+        if self.held && !held {
+            self.released = Some(now);
+        }
+        self.held = held;
+    }
+
     /// Kills it if it is alive but has been silent beyond its stall limit; `last_data` is when
     /// its data last arrived.
     pub fn kill_if_stalled(&mut self, now: Instant, last_data: Instant) {
         if self.state != ProcessState::Running {
             return;
         }
-        let from = last_data.max(self.data_since.unwrap_or(self.started));
+        let from = policy::silent_since(last_data, self.data_since, self.started, self.released);
         if policy::stalled(
             Duration::from_millis(self.spec.stall_ms),
             now.duration_since(from),

@@ -3,7 +3,7 @@
 
 use crate::stack::Restart;
 use afs_shared::msg::Board;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// A process whose data flowed this long came up healthy: its death is not a crash loop, and
 /// its next restart waits the first backoff again.
@@ -35,6 +35,20 @@ pub fn backoff(first_ms: u64, streak: u32, healthy: bool) -> (Duration, u32) {
 /// How long a board may take before its data first flows: the servo waits for the sensor.
 pub fn start_grace(board: Option<Board>) -> Duration {
     Duration::from_secs(if board == Some(Board::Servo) { 5 } else { 2 })
+}
+
+/// Since when a running board counts as silent: its newest data, the moment its data first
+/// flowed (or its start, before that), or the moment the fault injector last let it go. A
+/// board held frozen for longer than its stall limit and then thawed has been silent all that
+/// time, but not of its own doing: its limit starts again when it is let go.
+pub fn silent_since(
+    last_data: Instant,
+    flowing_since: Option<Instant>,
+    started: Instant,
+    released: Option<Instant>,
+) -> Instant {
+    let from = last_data.max(flowing_since.unwrap_or(started));
+    released.map_or(from, |r| from.max(r))
 }
 
 /// Whether a running board is alive but stalled: silent for longer than its `stall` limit
@@ -105,5 +119,41 @@ mod tests {
         // Starting: only after the grace.
         assert!(!stalled(ms(100), ms(4_000), false, ms(4_000), grace, false));
         assert!(stalled(ms(100), ms(5_100), false, ms(5_100), grace, false));
+    }
+
+    /// Silence counts from the newest of: the data, the flow's start (the start before it),
+    /// the injector's release of a frozen board.
+    #[test]
+    fn silence_starts_again_when_a_held_board_is_let_go() {
+        let t0 = Instant::now();
+        let s = Duration::from_secs;
+        // Started at t0 + 1 s, data from t0 + 2 s, newest data at t0 (before both: the
+        // supervisor's initial value).
+        assert_eq!(silent_since(t0, None, t0 + s(1), None), t0 + s(1));
+        assert_eq!(
+            silent_since(t0, Some(t0 + s(2)), t0 + s(1), None),
+            t0 + s(2)
+        );
+        assert_eq!(
+            silent_since(t0 + s(3), Some(t0 + s(2)), t0, None),
+            t0 + s(3)
+        );
+        // Frozen from t0 + 3 s (its last data) and let go at t0 + 10 s: silent from 10 s,
+        // not 3 s (a 3-s stall limit would kill it the moment it is thawed).
+        let r = silent_since(t0 + s(3), Some(t0 + s(2)), t0, Some(t0 + s(10)));
+        assert_eq!(r, t0 + s(10));
+        assert!(!stalled(
+            s(3),
+            (t0 + s(10)).duration_since(r),
+            true,
+            s(10),
+            s(2),
+            false
+        ));
+        // A release before its newest data changes nothing.
+        assert_eq!(
+            silent_since(t0 + s(3), None, t0, Some(t0 + s(1))),
+            t0 + s(3)
+        );
     }
 }

@@ -77,7 +77,7 @@ impl Supervisor {
                 }
                 Action::Hold(b, h) => {
                     if let Some(p) = self.proc_mut(b) {
-                        p.held = h;
+                        p.hold(h, Instant::now());
                     }
                 }
                 Action::SignalLink(sig) => {
