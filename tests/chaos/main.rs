@@ -41,11 +41,10 @@ fn assert_correct(out: &Output, r: &RunReport) {
         .filter(|c| !c.pass && !c.is_target())
         .map(|c| c.line())
         .collect();
-    let all_targets_met = r.checks.iter().all(|c| c.pass || !c.is_target());
-    let code = out.status.code();
     assert!(
-        failed.is_empty() && (code == Some(0) || (code == Some(1) && !all_targets_met)),
-        "failed checks: {failed:?} (exit {code:?})\nstderr: {}",
+        correct(out, r),
+        "failed checks: {failed:?} (exit {:?})\nstderr: {}",
+        out.status.code(),
         String::from_utf8_lossy(&out.stderr)
     );
 }

@@ -100,6 +100,16 @@ pub fn failed(r: &RunReport) -> String {
         .collect()
 }
 
+/// Whether a run was correct: every check but the timing targets passed, and it exited with
+/// 0, or with 1 because a target was missed (a loaded machine, or no SCHED_FIFO: the targets
+/// are the run's report, not the tests' assertions).
+pub fn correct(out: &Output, r: &RunReport) -> bool {
+    let wrong = r.checks.iter().any(|c| !c.pass && !c.is_target());
+    let all_targets_met = r.checks.iter().all(|c| c.pass || !c.is_target());
+    let code = out.status.code();
+    !wrong && (code == Some(0) || (code == Some(1) && !all_targets_met))
+}
+
 /// Asserts `out` is a clear refusal of `what`: exit status 2, `needle` in stderr, no panic.
 pub fn assert_refused(out: &Output, what: &dyn std::fmt::Debug, needle: &str) {
     let err = String::from_utf8_lossy(&out.stderr);

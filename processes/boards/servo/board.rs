@@ -194,7 +194,14 @@ impl ServoBoard {
             return self.tick_peg(now, late);
         }
         self.take_force();
-        let (force, used) = self.input(now);
+        // At SCHED_FIFO the sensor (above the servo) samples first after any stall: the data
+        // are judged at the wake-up. At normal priority, at the tick's due time (`input`).
+        let due = if self.is_fifo() {
+            now
+        } else {
+            deadline.min(now)
+        };
+        let (force, used) = self.input(now, due);
         if self.seq > self.tick_limit {
             return Tick::Done;
         }
@@ -242,12 +249,20 @@ impl ServoBoard {
     }
 
     /// The force the tick uses, from the newest accepted force sample (its tare handed to the
-    /// controller when it changed), and that sample with its age (None: none young enough, the
-    /// safe state's reason noted).
-    fn input(&mut self, now: u64) -> (Force, Option<(WrenchSample, u64)>) {
+    /// controller when it changed), and that sample with its age at `now` (None: none young
+    /// enough, the safe state's reason noted).
+    ///
+    /// The sample's age is judged at `due`: the wake-up at SCHED_FIFO, the tick's due time at
+    /// normal priority. There a servo that woke late (something else held its CPU) finds the
+    /// data as old as its own lateness, its sensor, stalled with it on the same CPU, not having
+    /// sampled since: that is the servo's stall, not the sensor's, and it does not put the
+    /// servo in its safe state. A sensor that stops while the servo keeps time still does,
+    /// at the limit after its last sample (docs/stack.md).
+    fn input(&mut self, now: u64, due: u64) -> (Force, Option<(WrenchSample, u64)>) {
         let mut input = Force::default();
-        match self.gate.current(now) {
-            Ok((w, age)) => {
+        match self.gate.current(due) {
+            Ok((w, _)) => {
+                let age = now.saturating_sub(w.sample_ns);
                 input.reading = w.wrench();
                 input.valid = true;
                 let tare = w.tare();
