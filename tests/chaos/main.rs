@@ -155,28 +155,17 @@ fn sensor_killed_or_frozen_the_servo_stays_safe_and_recovers() {
 /// The estimator frozen while the servo probes and killed once the servo's request is in its
 /// queue: the servo times out, re-sends to the restarted estimator, and gets a right tangent.
 /// Then the estimator frozen for good: the stall policy kills and replaces it.
-///
-/// Without SCHED_FIFO (any user but root) the servo stalls now and then beside a compile and
-/// cuts a probe short (its safe state); the injector then waits for the next probe. The run
-/// is longer there, so that a few cut probes still leave time for the fault: 32 s (as a user,
-/// beside the test command's compile, up to 4 probes were cut and the fault struck at 25.8 s).
 #[test]
 fn estimator_killed_mid_request_answers_after_the_restart() {
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let p = prefix("est");
-    let duration = if afs::rt::fifo_permitted() {
-        "20"
-    } else {
-        say("the servo runs without SCHED_FIFO: a 32-s run leaves time for cut probes");
-        "32"
-    };
     let (out, r) = chaos(
         &p,
         &[
             "--scenario",
             "surface-tracking",
             "--duration",
-            duration,
+            "20",
             "--kills",
             "2",
             "--faults",
