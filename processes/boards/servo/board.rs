@@ -194,14 +194,7 @@ impl ServoBoard {
             return self.tick_peg(now, late);
         }
         self.take_force();
-        // At SCHED_FIFO the sensor (above the servo) samples first after any stall: the data
-        // are judged at the wake-up. At normal priority, at the tick's due time (`input`).
-        let due = if self.is_fifo() {
-            now
-        } else {
-            deadline.min(now)
-        };
-        let (force, used) = self.input(now, due);
+        let (force, used) = self.input(now, late);
         if self.seq > self.tick_limit {
             return Tick::Done;
         }
@@ -252,13 +245,19 @@ impl ServoBoard {
     /// controller when it changed), and that sample with its age at `now` (None: none young
     /// enough, the safe state's reason noted).
     ///
-    /// The sample's age is judged at `due`: the wake-up at SCHED_FIFO, the tick's due time at
-    /// normal priority. There a servo that woke late (something else held its CPU) finds the
+    /// The sample's age is judged at the wake-up at SCHED_FIFO, where the sensor (above the
+    /// servo) samples first after any stall, and at the tick's due time (`late` before `now`)
+    /// at normal priority. There a servo that woke late (something else held its CPU) finds the
     /// data as old as its own lateness, its sensor, stalled with it on the same CPU, not having
     /// sampled since: that is the servo's stall, not the sensor's, and it does not put the
     /// servo in its safe state. A sensor that stops while the servo keeps time still does,
     /// at the limit after its last sample (docs/stack.md).
-    fn input(&mut self, now: u64, due: u64) -> (Force, Option<(WrenchSample, u64)>) {
+    fn input(&mut self, now: u64, late: u64) -> (Force, Option<(WrenchSample, u64)>) {
+        let due = if self.is_fifo() {
+            now
+        } else {
+            now.saturating_sub(late)
+        };
         let mut input = Force::default();
         match self.gate.current(due) {
             Ok((w, _)) => {

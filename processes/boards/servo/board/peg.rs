@@ -45,12 +45,7 @@ impl ServoBoard {
     /// unless a force above the limit ends it. Allocates nothing, takes no lock, logs nothing.
     pub(super) fn tick_peg(&mut self, now: u64, late: u64) -> Tick {
         self.take_force();
-        let due = if self.is_fifo() {
-            now
-        } else {
-            now.saturating_sub(late)
-        };
-        let (_, used) = self.input(now, due);
+        let (_, used) = self.input(now, late);
         if self.seq > self.tick_limit || self.peg.as_ref().is_none_or(InsertionRig::failed) {
             return Tick::Done;
         }
