@@ -86,6 +86,16 @@ impl SimConfig {
         Ok(())
     }
 
+    /// The servo's settings, with the force signal's delay taken from the sensor where the
+    /// settings leave it out.
+    pub fn servo_params(&self) -> crate::servo::ServoParams {
+        let mut p = self.servo;
+        if p.hybrid.force_signal_delay_s.is_none() {
+            p.hybrid.force_signal_delay_s = Some(self.sensor.signal_delay_s());
+        }
+        p
+    }
+
     /// The joint angles that put the tool at the start point pressed in to the preload.
     pub fn start_configuration(&self) -> Result<nalgebra::Vector2<f64>, ConfigError> {
         let arm = Arm::new(self.plant.arm);

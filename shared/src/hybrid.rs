@@ -37,6 +37,11 @@ pub struct HybridParams {
     pub max_normal_rate_m_per_s: f64,
     /// Tangential acceleration limit of the nominal trajectory (m/s²).
     pub tangential_acceleration_m_per_s2: f64,
+    /// Delay of the force signal from the contact to the servo, beyond the servo's own tick: the
+    /// sensor's filter and sampling (s). Unset: derived from the set-up's sensor
+    /// ([`crate::sensor::SensorParams::signal_delay_s`]). It bounds the force loop's rate
+    /// feedforward (docs/contact.md).
+    pub force_signal_delay_s: Option<f64>,
 }
 
 impl Default for HybridParams {
@@ -47,6 +52,7 @@ impl Default for HybridParams {
             force_bandwidth_hz: 1.5,
             max_normal_rate_m_per_s: 0.02,
             tangential_acceleration_m_per_s2: 0.2,
+            force_signal_delay_s: None,
         }
     }
 }
@@ -75,6 +81,15 @@ impl HybridParams {
                     "must be > 0",
                 ));
             }
+        }
+        if let Some(d) = self.force_signal_delay_s
+            && !(d.is_finite() && (0.0..=0.1).contains(&d))
+        {
+            return Err(ConfigError::setting(
+                "hybrid.force_signal_delay_s",
+                d,
+                "must lie in [0, 0.1] s (leave it out to derive it from the sensor)",
+            ));
         }
         if self.preload_n > 100.0 {
             return Err(ConfigError::setting(
@@ -185,12 +200,21 @@ pub struct HybridController {
     /// Normal set-point along −n̂ (into the surface) from the origin (m).
     depth: f64,
     depth_rate: f64,
+    /// β: the fraction of the force loop's set-point rate fed forward as a velocity
+    /// ([`rate_feedforward_fraction`]).
+    rate_feedforward: f64,
 }
 
 impl HybridController {
     /// A controller whose set-point starts at the frame origin. `servo_normal_stiffness` is the
-    /// PID servo's Cartesian stiffness along the normal (N/m).
-    pub fn new(params: HybridParams, frame: TaskFrame, servo_normal_stiffness: f64) -> Self {
+    /// PID servo's Cartesian stiffness along the normal (N/m); `loop_delay_s` the force
+    /// signal's whole delay from the contact to the torque (s).
+    pub fn new(
+        params: HybridParams,
+        frame: TaskFrame,
+        servo_normal_stiffness: f64,
+        loop_delay_s: f64,
+    ) -> Self {
         let ke = params.stiffness_estimate_n_per_m;
         let ks = servo_normal_stiffness;
         let hooke = if ks > 0.0 && ks.is_finite() {
@@ -198,6 +222,8 @@ impl HybridController {
         } else {
             ke
         };
+        let omega = std::f64::consts::TAU * params.force_bandwidth_hz;
+        let rate_feedforward = rate_feedforward_fraction(hooke, ke, omega, loop_delay_s);
         Self {
             params,
             frame,
@@ -207,6 +233,7 @@ impl HybridController {
             v_target: 0.0,
             depth: 0.0,
             depth_rate: 0.0,
+            rate_feedforward,
         }
     }
 
@@ -304,6 +331,18 @@ impl HybridController {
         self.s
     }
 
+    /// β: the fraction of the force loop's set-point rate fed forward as a velocity.
+    pub fn rate_feedforward(&self) -> f64 {
+        self.rate_feedforward
+    }
+
+    /// Sets β (clamped to [0, 1]), for experiments on the force loop's stability.
+    pub fn set_rate_feedforward(&mut self, beta: f64) {
+        if beta.is_finite() {
+            self.rate_feedforward = beta.clamp(0.0, 1.0);
+        }
+    }
+
     /// Rate of the normal set-point from the force loop (m/s, + into the surface).
     pub fn depth_rate(&self) -> f64 {
         self.depth_rate
@@ -381,7 +420,8 @@ impl HybridController {
         self.depth += self.depth_rate * dt;
         let position =
             self.frame.origin + t * (self.s + dither.0) - n * self.depth + extra.displacement;
-        let velocity = t * (self.s_dot + dither.1) - n * self.depth_rate + extra.velocity;
+        let velocity = t * (self.s_dot + dither.1) - n * (self.depth_rate * self.rate_feedforward)
+            + extra.velocity;
         let acceleration = t * (s_ddot + dither.2) + extra.acceleration;
         HybridCommand {
             position,
@@ -390,6 +430,24 @@ impl HybridController {
             normal_force_n: f_n,
             tangential_force_n: f_t,
         }
+    }
+}
+
+/// β, the fraction of the force loop's set-point rate `ẋ_d = ω_f (F_d − F_N)/k̂` that is fed
+/// forward as a set-point velocity (docs/contact.md, *The rate feedforward*).
+///
+/// Through the joints' damping c the feedforward is a proportional force feedback: it acts on
+/// the tool as a spring `κ = β c ω_f k_e/k̂` against the penetration. Seen through a delay τ, a
+/// spring κ is a damper `−κ τ`; it must leave the servo's own damping at least half of c, so
+/// `β ≤ k̂/(2 ω_f k_e τ)` (c cancels). Full feedforward (β = 1) where that allows it: soft
+/// contacts, where it makes the loop follow ω_f; a fraction on stiff ones. `hooke` is k̂ (N/m),
+/// `stiffness` k_e (N/m), `omega` ω_f (rad/s), `delay` τ (s).
+pub fn rate_feedforward_fraction(hooke: f64, stiffness: f64, omega: f64, delay: f64) -> f64 {
+    let bound = hooke / (2.0 * omega * stiffness * delay);
+    if bound.is_finite() {
+        bound.clamp(0.0, 1.0)
+    } else {
+        1.0
     }
 }
 
@@ -406,7 +464,7 @@ mod tests {
             ..Default::default()
         };
         let frame = TaskFrame::new(Vec2::zeros(), 0.0);
-        let mut c = HybridController::new(params, frame, f64::INFINITY);
+        let mut c = HybridController::new(params, frame, f64::INFINITY, 1e-3);
         let k = c.hooke_stiffness();
         assert_eq!(k, 10e3);
         let dt = 1e-4;
@@ -429,10 +487,26 @@ mod tests {
         assert!((err - (-1.0f64).exp()).abs() < 2e-3, "error fraction {err}");
     }
 
+    /// β is whole on soft contacts and, on stiff ones, where the delayed feedforward's damper
+    /// κτ = β c ω_f k_e τ/k̂ takes half the servo's damping c.
+    #[test]
+    fn rate_feedforward_stops_at_half_the_damping() {
+        let omega = std::f64::consts::TAU * 1.5;
+        let (ks, tau) = (1520.0, 0.7e-3);
+        let hooke = |ke: f64| ke * ks / (ke + ks);
+        assert_eq!(rate_feedforward_fraction(hooke(1e4), 1e4, omega, tau), 1.0);
+        for ke in [1e6, 1e7] {
+            let beta = rate_feedforward_fraction(hooke(ke), ke, omega, tau);
+            let share = beta * omega * ke * tau / hooke(ke);
+            assert!((share - 0.5).abs() < 1e-12, "k_e {ke}: κτ/c = {share}");
+        }
+        assert_eq!(rate_feedforward_fraction(hooke(1e6), 1e6, omega, 0.0), 1.0);
+    }
+
     #[test]
     fn tangent_feed_forward_keeps_setpoint_continuous() {
         let frame = TaskFrame::new(Vec2::new(0.4, 0.0), 0.0);
-        let mut c = HybridController::new(HybridParams::default(), frame, 1000.0);
+        let mut c = HybridController::new(HybridParams::default(), frame, 1000.0, 1e-3);
         c.set_velocity(0.02);
         let mut last = Vec2::zeros();
         for _ in 0..5000 {
@@ -463,7 +537,7 @@ mod tests {
     #[test]
     fn nominal_velocity_respects_acceleration_limit() {
         let frame = TaskFrame::new(Vec2::zeros(), 0.0);
-        let mut c = HybridController::new(HybridParams::default(), frame, 1000.0);
+        let mut c = HybridController::new(HybridParams::default(), frame, 1000.0, 1e-3);
         c.set_velocity(0.02);
         c.step(
             1e-4,

@@ -170,6 +170,15 @@ impl SensorParams {
             1.0 - (-std::f64::consts::TAU * self.cutoff_hz / self.rate_hz).exp()
         }
     }
+
+    /// Delay of a slow force change through the sensor (s): the filter's low-frequency group
+    /// delay `T (1 − α)/α` plus half a sample period for the reading held between samples.
+    /// With the filter off, half a sample period.
+    pub fn signal_delay_s(&self) -> f64 {
+        let period = 1.0 / self.rate_hz;
+        let alpha = self.filter_alpha();
+        period * (1.0 - alpha) / alpha + 0.5 * period
+    }
 }
 
 /// One sensor reading.

@@ -78,7 +78,7 @@ impl Lockstep {
         }
         let tangent = cfg.surface.tangent_angle_at(cfg.start_u_m) + cfg.tangent_error_rad;
         let mut servo = ServoCore::new(
-            cfg.servo,
+            cfg.servo_params(),
             cfg.plant.arm,
             cfg.plant.elbow,
             q,
@@ -473,3 +473,7 @@ mod tests {
         assert_eq!(sim.servo().state(), before);
     }
 }
+
+#[cfg(test)]
+#[path = "sim_contact_tests.rs"]
+mod contact_tests;

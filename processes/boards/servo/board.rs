@@ -480,7 +480,7 @@ fn controller(
     let wrench0 = first.wrench().tared(first.tare());
     let new = |q| {
         ServoCore::new(
-            cfg.servo,
+            cfg.servo_params(),
             cfg.plant.arm,
             cfg.plant.elbow,
             q,

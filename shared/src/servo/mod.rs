@@ -173,7 +173,13 @@ impl ServoCore {
         pid.preset_torque(hold);
         let frame = TaskFrame::new(arm.forward(q0), tangent_angle);
         let k_servo = servo_stiffness_along(&arm, q0, [gains[0].kp, gains[1].kp], frame.normal());
-        let hybrid = HybridController::new(params.hybrid, frame, k_servo);
+        let signal_delay = params
+            .hybrid
+            .force_signal_delay_s
+            .unwrap_or_else(|| crate::sensor::SensorParams::default().signal_delay_s());
+        // The reading waits up to a tick for the servo, whose torque then holds for a tick.
+        let loop_delay = signal_delay + 1.5 * params.dt();
+        let hybrid = HybridController::new(params.hybrid, frame, k_servo, loop_delay);
         let amplitude_bound = params.dither.amplitude_bound(
             params.hybrid.preload_n,
             params.hybrid.stiffness_estimate_n_per_m,
