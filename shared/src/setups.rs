@@ -73,7 +73,7 @@ impl Rig {
     }
 
     /// Applies the rig to `cfg` (whose surface shape, seed and other settings are kept). The
-    /// thesis rig turns both feedforwards off and moves the surface's origin to the point
+    /// thesis rig turns both feedforwards and the added contact damping off and moves the surface's origin to the point
     /// [`THESIS_RIG_REACH_M`] from the base on the arm's X axis, turned so that link 2 still
     /// points into the surface along its normal (the thesis's task frame, fig. 3.3); there
     /// `M12 ≠ 0` and a motion along the normal needs both joints.
@@ -83,6 +83,7 @@ impl Rig {
         }
         cfg.servo.inertia_feedforward = false;
         cfg.servo.preload_feedforward = false;
+        cfg.servo.contact_damping_ratio = 0.0;
         // The thesis bounds the dither by the actuators only and stepped it by 5 mm (fig. 4.7):
         // allow 6 mm, with the contact bound for a tangent known to 1.5° (7.6 mm at the
         // default preload and stiffness).

@@ -76,7 +76,7 @@ fn rate_feedforward_margins() {
         for k_e in [1e5, 1e6] {
             let beta = at_rest(k_e, rate, None).servo().hybrid().rate_feedforward();
             let mut row = format!("| {rate} | {k_e:e} | {beta:.4} |");
-            for f in [1.0, 2.0, 2.5, 3.0, 4.0] {
+            for f in [1.0, 2.0, 3.0, 4.0, 6.0, 8.0] {
                 if beta * f > 1.0 {
                     continue;
                 }
@@ -84,6 +84,101 @@ fn rate_feedforward_margins() {
                 row += &format!(" ×{f}: {lo:.2}–{hi:.2};");
             }
             println!("{row}");
+        }
+    }
+}
+
+/// The true normal force's range and RMS deviation from the preload (N) over 2 s, after 2 s,
+/// of sliding at `velocity` (m/s) with the dither held at `a_omega` (m/s) on a contact of
+/// stiffness `k_e` (N/m), the servo told `k_e`, the tangent off by `tilt_deg`, the contact
+/// mode's damping ratio set to `zeta`. The dither's amplitude bound is lifted (it allows
+/// 0.04 mm at 1 MN/m, docs/contact.md).
+fn dithered(
+    k_e: f64,
+    a_omega: f64,
+    velocity: f64,
+    tilt_deg: f64,
+    zeta: f64,
+) -> (f64, f64, f64, f64) {
+    let mut cfg = SimConfig::default();
+    cfg.plant.contact.interaction_stiffness_n_per_m = k_e;
+    cfg.servo.hybrid.stiffness_estimate_n_per_m = k_e;
+    cfg.servo.dither.tangent_uncertainty_deg = 0.01;
+    cfg.servo.contact_damping_ratio = zeta;
+    cfg.tangent_error_rad = tilt_deg.to_radians();
+    let preload = cfg.servo.hybrid.preload_n;
+    let mut sim = Lockstep::new(&cfg).unwrap();
+    let added = sim.servo().normal_damping();
+    sim.servo_mut().set_tuning(false);
+    sim.servo_mut().set_a_omega(a_omega);
+    sim.servo_mut().hybrid_mut().set_velocity(velocity);
+    sim.run((2.0 / sim.dt()).round() as usize);
+    let n = (2.0 / sim.dt()).round() as usize;
+    let (mut lo, mut hi, mut sq) = (f64::INFINITY, f64::NEG_INFINITY, 0.0);
+    for _ in 0..n {
+        sim.step();
+        let f = sim.truth().normal_force_n;
+        lo = lo.min(f);
+        hi = hi.max(f);
+        sq += (f - preload).powi(2);
+    }
+    (lo, hi, (sq / n as f64).sqrt(), added)
+}
+
+/// The damping added along the normal gives the contact mode the requested ratio, and none
+/// is added where the servo's own damping suffices.
+#[test]
+fn the_added_damping_gives_the_contact_mode_its_ratio() {
+    use crate::servo::contact_damping;
+    let (ks, m, cs) = (1520.0, 18.0, 231.0);
+    for (zeta, ke) in [(0.25, 1e5), (0.25, 1e6), (0.7, 1e4), (0.7, 1e6)] {
+        let added = contact_damping(zeta, ke, ks, m, cs);
+        let ratio = (cs + added) / (2.0 * ((ke + ks) * m).sqrt());
+        assert!((ratio - zeta).abs() < 1e-12, "ζ {zeta}, k_e {ke}: {ratio}");
+    }
+    assert_eq!(contact_damping(0.25, 1e4, ks, m, cs), 0.0);
+    assert_eq!(contact_damping(0.0, 1e6, ks, m, cs), 0.0);
+    // The default set-up's contact is damped enough: nothing is added, nothing changes.
+    let sim = Lockstep::new(&SimConfig::default()).unwrap();
+    assert_eq!(sim.servo().normal_damping(), 0.0);
+}
+
+/// Sliding and dithering on steel (1 MN/m): friction's reversals at the dither's frequency
+/// shake the contact mode (37 Hz, ζ = 0.03 undamped). Without the added damping the tool
+/// leaves the surface; with the default ζ_c = 0.25 it stays pressed.
+#[test]
+fn the_damped_contact_mode_keeps_a_dithered_tool_on_steel() {
+    let (lo, hi, _, _) = dithered(1e6, 0.03, 0.005, 0.0, 0.25);
+    assert!(lo > 1.5 && hi < 3.5, "damped: F_N {lo:.2}..{hi:.2} N");
+    let (lo, _, _, _) = dithered(1e6, 0.03, 0.005, 0.0, 0.0);
+    assert!(lo < 0.5, "undamped: F_N stayed ≥ {lo:.2} N");
+}
+
+/// Prints docs/contact.md's table of the dithered contact's normal force, with and without
+/// the added damping. `cargo test -p afs-shared --profile ci --lib contact_damping_table -- --ignored --nocapture`
+#[test]
+#[ignore = "prints docs/contact.md's table"]
+fn contact_damping_table() {
+    println!(
+        "| k_e (N/m) | Aω (m/s) | tangent error | ζ_c | added damping (N·s/m) | F_N range (N) | RMS deviation (N) |"
+    );
+    println!("|---|---:|---:|---:|---:|---|---:|");
+    let sim = Lockstep::new(&SimConfig::default()).unwrap();
+    let [m, c_s, k_s] = sim.servo().contact_mode();
+    eprintln!("m = {m:.2} kg, c_s = {c_s:.1} N·s/m, k_s = {k_s:.0} N/m");
+    for k_e in [1e4, 1e5, 1e6] {
+        let zeta = c_s / (2.0 * ((k_e + k_s) * m).sqrt());
+        let hz = ((k_e + k_s) / m).sqrt() / std::f64::consts::TAU;
+        eprintln!("k_e {k_e:e}: the servo's own ζ = {zeta:.3}, mode at {hz:.1} Hz");
+    }
+    for k_e in [1e4, 1e5, 1e6] {
+        for (a_omega, tilt) in [(0.03, 0.0), (0.06, 0.0), (0.06, 2.0)] {
+            for zeta in [0.0, 0.25, 0.7] {
+                let (lo, hi, rms, c) = dithered(k_e, a_omega, 0.005, tilt, zeta);
+                println!(
+                    "| {k_e:e} | {a_omega} | {tilt}° | {zeta} | {c:.0} | {lo:.2}–{hi:.2} | {rms:.3} |"
+                );
+            }
         }
     }
 }

@@ -124,6 +124,11 @@ pub struct ServoCore {
     contact_lost_ticks: u32,
     /// The last estimate turned a corner: estimate once more `corner_confirm_m` on.
     confirm_corner: bool,
+    /// Damping added along the normal on the velocity error (N·s/m, [`contact_damping`]).
+    normal_damping: f64,
+    /// The contact mode's arm side at the start, along the normal: the arm's effective mass
+    /// (kg), the servo's own damping (N·s/m) and stiffness (N/m).
+    contact_mode: [f64; 3],
 }
 
 /// Probe samples are recorded every this many servo ticks (1 kHz at 10 kHz).
@@ -132,10 +137,34 @@ pub const PROBE_DECIMATION: usize = 10;
 /// The PID joint servos' Cartesian stiffness along direction `n` at `q`:
 /// `1 / (nᵀ J Kp⁻¹ Jᵀ n)` (N/m).
 pub fn servo_stiffness_along(arm: &Arm, q: Vector2<f64>, kp: [f64; 2], n: Vec2) -> f64 {
+    along(arm, q, Matrix2::new(1.0 / kp[0], 0.0, 0.0, 1.0 / kp[1]), n)
+}
+
+/// `1/(nᵀ J G⁻¹ Jᵀ n)`: what a joint-space gain matrix G (stiffness, damping or the mass
+/// matrix), given as its inverse `inverse`, amounts to along the Cartesian direction `n` at
+/// `q`, the other direction free.
+fn along(arm: &Arm, q: Vector2<f64>, inverse: Matrix2<f64>, n: Vec2) -> f64 {
     let j = arm.jacobian(q);
-    let kinv = Matrix2::new(1.0 / kp[0], 0.0, 0.0, 1.0 / kp[1]);
-    let c = j * kinv * j.transpose();
-    1.0 / n.dot(&(c * n))
+    1.0 / n.dot(&(j * inverse * j.transpose() * n))
+}
+
+/// Damping to add along the normal (N·s/m) so that the contact mode, the effective mass
+/// `mass` (kg) on the contact `stiffness` (N/m) in parallel with the servo's `servo_stiffness`,
+/// has the damping ratio `zeta` with the servo's own `servo_damping` (N·s/m):
+/// `max(0, 2ζ √((k̂_e + k_s) m) − c_s)` (docs/contact.md).
+pub fn contact_damping(
+    zeta: f64,
+    stiffness: f64,
+    servo_stiffness: f64,
+    mass: f64,
+    servo_damping: f64,
+) -> f64 {
+    let want = 2.0 * zeta * ((stiffness + servo_stiffness) * mass).sqrt();
+    if want.is_finite() {
+        (want - servo_damping).max(0.0)
+    } else {
+        0.0
+    }
 }
 
 impl ServoCore {
@@ -173,6 +202,17 @@ impl ServoCore {
         pid.preset_torque(hold);
         let frame = TaskFrame::new(arm.forward(q0), tangent_angle);
         let k_servo = servo_stiffness_along(&arm, q0, [gains[0].kp, gains[1].kp], frame.normal());
+        let m_inv = m.try_inverse().unwrap_or_else(Matrix2::zeros);
+        let normal_mass = along(&arm, q0, m_inv, frame.normal());
+        let kd_inv = Matrix2::new(1.0 / gains[0].kd, 0.0, 0.0, 1.0 / gains[1].kd);
+        let normal_servo_damping = along(&arm, q0, kd_inv, frame.normal());
+        let normal_damping = contact_damping(
+            params.contact_damping_ratio,
+            params.hybrid.stiffness_estimate_n_per_m,
+            k_servo,
+            normal_mass,
+            normal_servo_damping,
+        );
         let signal_delay = params
             .hybrid
             .force_signal_delay_s
@@ -237,6 +277,8 @@ impl ServoCore {
             last_stroke: SetpointOffset::default(),
             contact_lost_ticks: 0,
             confirm_corner: false,
+            normal_damping,
+            contact_mode: [normal_mass, normal_servo_damping, k_servo],
         })
     }
 
@@ -318,6 +360,17 @@ impl ServoCore {
     /// Name of the configured tuner.
     pub fn tuner_name(&self) -> &'static str {
         self.tuner.name()
+    }
+
+    /// The damping added along the normal (N·s/m).
+    pub fn normal_damping(&self) -> f64 {
+        self.normal_damping
+    }
+
+    /// The contact mode's arm side at the start, along the normal: the arm's effective mass
+    /// (kg), the servo's own damping (N·s/m) and stiffness (N/m).
+    pub fn contact_mode(&self) -> [f64; 3] {
+        self.contact_mode
     }
 
     /// Last tick's diagnostics.
@@ -432,6 +485,15 @@ impl ServoCore {
             let n_hat = self.hybrid.frame().normal();
             feedforward -=
                 self.arm.jacobian_at(&pose).transpose() * (n_hat * self.hybrid.params().preload_n);
+        }
+        if self.normal_damping > 0.0 {
+            // Damps the contact mode: the normal velocity's error against the set-point's own
+            // (the force loop's rate), not against a probe stroke's, which presses into the
+            // surface on purpose (docs/contact.md).
+            let n_hat = self.hybrid.frame().normal();
+            let j = self.arm.jacobian_at(&pose);
+            let error = (j * inp.qd - cmd.velocity + extra.velocity).dot(&n_hat);
+            feedforward -= j.transpose() * (n_hat * (self.normal_damping * error));
         }
         let tau = self.pid.torque(q_d, qd_d, inp.q, inp.qd, feedforward, dt);
 

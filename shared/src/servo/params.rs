@@ -43,6 +43,10 @@ pub struct ServoParams {
     /// as a fixed torque, and the force it transmits changes with the configuration as the tool
     /// moves (0.25 % per mm here), which tilts the tangent estimate by about 0.35°.
     pub preload_feedforward: bool,
+    /// Damping ratio ζ_c the servo gives the contact's normal mode (the arm's effective mass on
+    /// the contact's stiffness in parallel with the servo's), by adding damping along the
+    /// normal where its own falls short (docs/contact.md). 0: none added.
+    pub contact_damping_ratio: f64,
     /// Tangent-estimation probes (thesis §5.3).
     pub tangent: TangentParams,
     /// When to start a tangent estimation on its own (thesis §5.3.2).
@@ -194,6 +198,7 @@ impl Default for ServoParams {
             tool_mass_kg: 0.05,
             inertia_feedforward: true,
             preload_feedforward: true,
+            contact_damping_ratio: 0.25,
             tangent: TangentParams::default(),
             tracking: TrackingParams::default(),
             safe: SafeParams::default(),
@@ -298,6 +303,15 @@ impl ServoParams {
                 "servo.joint_integral_ratio",
                 self.joint_integral_ratio,
                 "must lie in [0, 1)",
+            ));
+        }
+        if !(self.contact_damping_ratio.is_finite()
+            && (0.0..=5.0).contains(&self.contact_damping_ratio))
+        {
+            return Err(ConfigError::setting(
+                "servo.contact_damping_ratio",
+                self.contact_damping_ratio,
+                "must lie in [0, 5] (0 adds no damping)",
             ));
         }
         self.hybrid.validate()?;
