@@ -182,6 +182,10 @@ wire_struct! {
         pub preload_n: f64,
         /// Stiffness of the Hooke's-law update (N/m).
         pub hooke_stiffness_n_per_m: f64,
+        /// The contact stiffness k̂_e in use (N/m): configured, or adopted from the fit.
+        pub stiffness_estimate_n_per_m: f64,
+        /// β, the fraction of the set-point rate fed forward.
+        pub rate_feedforward: f64,
     }
 }
 
@@ -215,26 +219,47 @@ impl HybridController {
         servo_normal_stiffness: f64,
         loop_delay_s: f64,
     ) -> Self {
-        let ke = params.stiffness_estimate_n_per_m;
-        let ks = servo_normal_stiffness;
-        let hooke = if ks > 0.0 && ks.is_finite() {
-            ke * ks / (ke + ks)
-        } else {
-            ke
-        };
-        let omega = std::f64::consts::TAU * params.force_bandwidth_hz;
-        let rate_feedforward = rate_feedforward_fraction(hooke, ke, omega, loop_delay_s);
-        Self {
+        let mut c = Self {
             params,
             frame,
-            hooke_stiffness: hooke,
+            hooke_stiffness: params.stiffness_estimate_n_per_m,
             s: 0.0,
             s_dot: 0.0,
             v_target: 0.0,
             depth: 0.0,
             depth_rate: 0.0,
-            rate_feedforward,
+            rate_feedforward: 1.0,
+        };
+        c.set_stiffness_estimate(
+            params.stiffness_estimate_n_per_m,
+            servo_normal_stiffness,
+            loop_delay_s,
+        );
+        c
+    }
+
+    /// Takes a contact stiffness k̂_e (N/m): the Hooke's-law stiffness k̂ (k̂_e in series with
+    /// the servo's `servo_normal_stiffness`, N/m) and β (for the loop's delay `loop_delay_s`,
+    /// s) follow. Ignored unless finite and positive.
+    pub fn set_stiffness_estimate(
+        &mut self,
+        stiffness: f64,
+        servo_normal_stiffness: f64,
+        loop_delay_s: f64,
+    ) {
+        if !(stiffness.is_finite() && stiffness > 0.0) {
+            return;
         }
+        let (ke, ks) = (stiffness, servo_normal_stiffness);
+        self.params.stiffness_estimate_n_per_m = ke;
+        self.hooke_stiffness = if ks > 0.0 && ks.is_finite() {
+            ke * ks / (ke + ks)
+        } else {
+            ke
+        };
+        let omega = std::f64::consts::TAU * self.params.force_bandwidth_hz;
+        self.rate_feedforward =
+            rate_feedforward_fraction(self.hooke_stiffness, ke, omega, loop_delay_s);
     }
 
     /// The settings.
@@ -254,6 +279,8 @@ impl HybridController {
             depth_rate_m_per_s: self.depth_rate,
             preload_n: self.params.preload_n,
             hooke_stiffness_n_per_m: self.hooke_stiffness,
+            stiffness_estimate_n_per_m: self.params.stiffness_estimate_n_per_m,
+            rate_feedforward: self.rate_feedforward,
         }
     }
 
@@ -267,6 +294,8 @@ impl HybridController {
         self.depth_rate = s.depth_rate_m_per_s;
         self.params.preload_n = s.preload_n;
         self.hooke_stiffness = s.hooke_stiffness_n_per_m;
+        self.params.stiffness_estimate_n_per_m = s.stiffness_estimate_n_per_m;
+        self.rate_feedforward = s.rate_feedforward;
     }
 
     /// Changes the desired normal force (N).

@@ -8,6 +8,7 @@ pub mod arm;
 pub mod batch;
 pub mod check;
 pub mod config;
+pub mod contact;
 pub mod correlation;
 pub mod dither;
 pub mod error;

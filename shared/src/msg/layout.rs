@@ -5,9 +5,10 @@
 
 use super::*;
 use crate::arm::JointServoState;
+use crate::contact::StiffnessFitState;
 use crate::dither::DitherState;
 use crate::hybrid::HybridState;
-use crate::servo::{EstimationCounters, SafeState, ServoState, TrackState};
+use crate::servo::{ContactState, EstimationCounters, SafeState, ServoState, TrackState};
 use crate::tangent::ProbeSample;
 use crate::tuner::TunerState;
 use crate::watchdog::GateCounters;
@@ -152,6 +153,8 @@ pub fn layouts() -> Vec<MessageLayout> {
         L::part::<SlidingSummary>(),
         L::part::<PeriodWindowState>(),
         L::part::<InsertionState>(),
+        L::part::<ContactState>(),
+        L::part::<StiffnessFitState>(),
     ]
 }
 

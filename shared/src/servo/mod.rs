@@ -14,11 +14,13 @@
 //! | `safe` | the safe state on untrusted force data |
 //! | `state` | [`ServoState`]: everything that crosses a restart, made of named parts |
 
+mod contact;
 mod params;
 mod safe;
 mod state;
 mod tracking;
 
+pub use contact::ContactState;
 pub use params::{SafeParams, ServoParams, TrackingParams};
 pub use safe::SafeState;
 pub use state::{ServoState, ServoStateFlags, TareState};
@@ -129,6 +131,16 @@ pub struct ServoCore {
     /// The contact mode's arm side at the start, along the normal: the arm's effective mass
     /// (kg), the servo's own damping (N·s/m) and stiffness (N/m).
     contact_mode: [f64; 3],
+    /// The force signal's whole delay from the contact to the torque (s).
+    loop_delay: f64,
+    /// The contact's normal stiffness, fitted on line (docs/contact.md).
+    stiffness: crate::contact::StiffnessEstimator,
+    /// The task frame the fit's coordinates are measured in (a new one restarts it).
+    stiffness_frame: TaskFrame,
+    /// Ticks since the fit's last sample.
+    contact_phase: u32,
+    /// Times the servo adopted a fitted stiffness.
+    adopted: u32,
 }
 
 /// Probe samples are recorded every this many servo ticks (1 kHz at 10 kHz).
@@ -279,6 +291,11 @@ impl ServoCore {
             confirm_corner: false,
             normal_damping,
             contact_mode: [normal_mass, normal_servo_damping, k_servo],
+            loop_delay,
+            stiffness: crate::contact::StiffnessEstimator::new(Default::default()),
+            stiffness_frame: frame,
+            contact_phase: 0,
+            adopted: 0,
         })
     }
 
@@ -517,6 +534,9 @@ impl ServoCore {
         if valid && !safe {
             self.check_triggers(dt, normal);
             self.guard_contact(dt, normal);
+            if self.mode == ServoMode::Track {
+                self.observe_contact(dt, self.arm.forward_at(&pose), normal);
+            }
         }
         if self.tuning && valid && !safe && nominal > 0.0 && self.mode == ServoMode::Track {
             let input = TunerInput {

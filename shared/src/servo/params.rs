@@ -47,6 +47,9 @@ pub struct ServoParams {
     /// the contact's stiffness in parallel with the servo's), by adding damping along the
     /// normal where its own falls short (docs/contact.md). 0: none added.
     pub contact_damping_ratio: f64,
+    /// Adopt the contact stiffness fitted on line when it is tight and more than a factor of 2
+    /// from the one in use, and re-derive the gains that depend on it (docs/contact.md).
+    pub contact_adaptation: bool,
     /// Tangent-estimation probes (thesis §5.3).
     pub tangent: TangentParams,
     /// When to start a tangent estimation on its own (thesis §5.3.2).
@@ -199,6 +202,7 @@ impl Default for ServoParams {
             inertia_feedforward: true,
             preload_feedforward: true,
             contact_damping_ratio: 0.25,
+            contact_adaptation: true,
             tangent: TangentParams::default(),
             tracking: TrackingParams::default(),
             safe: SafeParams::default(),

@@ -117,6 +117,8 @@ wire_struct! {
         /// The probe stroke commanded last tick (m, world), absorbed into the set-point if a
         /// probe run is restarted.
         pub last_stroke_m: [f64; 2],
+        /// What the servo knows of its contact.
+        pub contact: super::ContactState,
     }
 }
 
@@ -173,6 +175,7 @@ impl ServoCore {
                 self.last_stroke.displacement.x,
                 self.last_stroke.displacement.y,
             ],
+            contact: self.contact_state(),
         }
     }
 
@@ -189,6 +192,7 @@ impl ServoCore {
         self.contact_lost_ticks = st.contact_lost_ticks;
         self.pid.restore(&st.joints);
         self.hybrid.restore(&st.hybrid);
+        self.restore_contact(&st.contact);
         self.dither.restore(&st.dither);
         self.tuner.restore(&st.tuner);
         self.track = st.track;
