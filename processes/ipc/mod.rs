@@ -487,6 +487,23 @@ pub fn create_world(node: &Node<Svc>) -> Result<blackboard::PortFactory<Svc, u64
         .with_context(|| format!("creating blackboard '{}'", service::WORLD))
 }
 
+/// The newest snapshot any incarnation of the servo left in the world blackboard (of the
+/// current layout), or None before the first.
+pub fn newest_world(factory: &blackboard::PortFactory<Svc, u64>) -> Result<Option<WorldSnapshot>> {
+    let reader = factory.reader_builder().create().context("world reader")?;
+    let mut newest: Option<WorldSnapshot> = None;
+    for k in 0..WORLD_SLOTS {
+        let s = *reader
+            .entry::<WorldSnapshot>(&k)
+            .with_context(|| format!("world entry {k}"))?
+            .get();
+        if s.version == WorldSnapshot::VERSION && newest.is_none_or(|n| s.seq > n.seq) {
+            newest = Some(s);
+        }
+    }
+    Ok(newest)
+}
+
 /// Opens the world-state blackboard, if the supervisor made one.
 pub fn open_world(node: &Node<Svc>) -> Option<blackboard::PortFactory<Svc, u64>> {
     node.service_builder(&name(service::WORLD).ok()?)

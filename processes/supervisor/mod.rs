@@ -77,6 +77,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunReport> {
     let end = sup.end.unwrap_or(RunEnd::Interrupted);
     let samples = sup.joiner.counts(sup.wrench_received);
     drop(sup);
+    let contact = setup.contact_report();
     let cleanup = setup.release(&procs)?;
     let (stack, scenario, duration) = (&setup.stack, &setup.scenario, setup.duration);
 
@@ -114,6 +115,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunReport> {
         sensor: sensor_stats.as_ref().map(SensorReport::from),
         friction: friction.as_ref().map(FrictionIdReport::from),
         samples,
+        contact,
         processes: procs
             .into_iter()
             .map(|p| ProcessReport {

@@ -221,6 +221,10 @@ pub struct RunReport {
     pub friction: Option<FrictionIdReport>,
     /// World, controller and force samples counted.
     pub samples: SampleCounts,
+    /// What the servo knew of its contact at the end: the stiffness its gains were derived
+    /// for, its on-line fit (docs/contact.md). None if it left no snapshot.
+    #[serde(default)]
+    pub contact: Option<afs_shared::servo::ContactReport>,
     /// The processes.
     pub processes: Vec<ProcessReport>,
     /// The recording, if one was asked for.
@@ -276,6 +280,20 @@ impl fmt::Display for RunReport {
                 fr.start_mean_n,
                 100.0 * fr.end_ratio,
                 1e3 * fr.settled_a_omega_m_per_s
+            )?;
+        }
+        if let Some(c) = &self.contact {
+            let fit = match (c.fitted_n_per_m, c.fitted_std_error_n_per_m) {
+                (Some(k), Some(e)) => format!("{:.3e} ± {:.1e} N/m", k, e),
+                _ => "none".to_string(),
+            };
+            writeln!(
+                f,
+                "  contact: gains for {:.3e} N/m ({} adopted), fitted {fit}; β {:.3}, damping added {:.0} N·s/m",
+                c.stiffness_in_use_n_per_m,
+                c.adoptions,
+                c.rate_feedforward,
+                c.added_damping_n_s_per_m
             )?;
         }
         if let Some(l) = &self.loop_stats {

@@ -194,6 +194,16 @@ impl Setup {
 
     /// Gives the prefix back once the run's processes (`procs`) have ended: the supervisor's
     /// own shared memory and set-up directory go first.
+    /// What the servo knew of its contact, from the newest snapshot it left (None if it left
+    /// none, or the blackboard is released).
+    pub(super) fn contact_report(&self) -> Option<afs_shared::servo::ContactReport> {
+        let world = self.world.as_ref()?;
+        let snapshot = ipc::newest_world(world).ok().flatten()?;
+        Some(afs_shared::servo::ContactReport::from_state(
+            &snapshot.controller,
+        ))
+    }
+
     pub(super) fn release(&mut self, procs: &[Proc]) -> Result<Cleanup> {
         let prefix = self.stack.prefix.clone();
         drop(self.world.take());

@@ -88,6 +88,12 @@ fn surface_tracking_across_processes_agrees_with_the_lockstep() {
     );
     assert_eq!(l.ticks, 100_000);
     assert!(r.stack.tracking.tangent_error_rms_deg < 1.0);
+    // What the servo knew of its contact, from its last snapshot: the gains for the configured
+    // 10 kN/m, kept (docs/contact.md), and a fit of that contact.
+    let c = r.contact.expect("the servo's contact report");
+    assert_eq!((c.stiffness_in_use_n_per_m, c.adoptions), (10e3, 0));
+    let fitted = c.fitted_n_per_m.expect("a stiffness fit");
+    assert!(fitted > 2e3 && fitted < 4e4, "fitted {fitted} N/m");
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
 }
 

@@ -51,22 +51,7 @@ impl WorldBoard {
 
     /// The newest snapshot any incarnation of the servo left (of the current layout).
     pub(super) fn newest(&self) -> Result<Option<WorldSnapshot>> {
-        let reader = self
-            .factory
-            .reader_builder()
-            .create()
-            .context("world reader")?;
-        let mut newest: Option<WorldSnapshot> = None;
-        for k in 0..ipc::WORLD_SLOTS {
-            let s = *reader
-                .entry::<WorldSnapshot>(&k)
-                .with_context(|| format!("world entry {k}"))?
-                .get();
-            if s.version == WorldSnapshot::VERSION && newest.is_none_or(|n| s.seq > n.seq) {
-                newest = Some(s);
-            }
-        }
-        Ok(newest)
+        ipc::newest_world(&self.factory)
     }
 }
 

@@ -123,3 +123,39 @@ impl ServoCore {
         self.adopted = self.adopted.saturating_add(1);
     }
 }
+
+/// What the servo knew of its contact at the end of a run, for the run's report (from its
+/// last snapshot).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
+pub struct ContactReport {
+    /// The contact stiffness k̂_e the gains were derived for (N/m): configured, or adopted.
+    pub stiffness_in_use_n_per_m: f64,
+    /// Times the servo adopted its fit.
+    pub adoptions: u32,
+    /// The fit's stiffness at the end (N/m), if it was determined: the contact in series with
+    /// the sensor, as the encoders and the sensor see it.
+    pub fitted_n_per_m: Option<f64>,
+    /// Its standard error (N/m).
+    pub fitted_std_error_n_per_m: Option<f64>,
+    /// β, the fraction of the force loop's rate fed forward.
+    pub rate_feedforward: f64,
+    /// Damping added along the normal (N·s/m).
+    pub added_damping_n_s_per_m: f64,
+}
+
+impl ContactReport {
+    /// The report of a servo's state.
+    pub fn from_state(state: &super::ServoState) -> Self {
+        let mut fit = crate::contact::StiffnessEstimator::new(Default::default());
+        fit.restore(&state.contact.fit);
+        let e = fit.estimate();
+        Self {
+            stiffness_in_use_n_per_m: state.hybrid.stiffness_estimate_n_per_m,
+            adoptions: state.contact.adopted,
+            fitted_n_per_m: e.map(|e| e.stiffness_n_per_m),
+            fitted_std_error_n_per_m: e.map(|e| e.std_error_n_per_m),
+            rate_feedforward: state.hybrid.rate_feedforward,
+            added_damping_n_s_per_m: state.contact.normal_damping_n_s_per_m,
+        }
+    }
+}

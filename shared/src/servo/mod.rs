@@ -20,7 +20,7 @@ mod safe;
 mod state;
 mod tracking;
 
-pub use contact::ContactState;
+pub use contact::{ContactReport, ContactState};
 pub use params::{SafeParams, ServoParams, TrackingParams};
 pub use safe::SafeState;
 pub use state::{ServoState, ServoStateFlags, TareState};
