@@ -201,10 +201,40 @@ fn a_servo_told_a_soft_contact_learns_a_stiff_one() {
             assert!(lo > 2.4 && hi < 2.6, "adapting: F_N {lo:.3}..{hi:.3} N");
             assert!(sim.servo().stiffness_adoptions() >= 1);
             assert!((in_use / truth - 1.0).abs() < 0.5, "adopted {in_use:e} N/m");
+            // The dither's bound follows: the preload's penetration into the adopted contact.
+            let bound = cfg
+                .servo
+                .dither
+                .amplitude_bound(cfg.servo.hybrid.preload_n, in_use);
+            assert_eq!(sim.servo().amplitude_bound(), bound);
+            assert!(bound < 1e-4, "bound {bound} m");
         } else {
             assert!(lo < 0.5, "not adapting: F_N {lo:.3}..{hi:.3} N");
             assert_eq!(in_use, 10e3);
         }
+    }
+}
+
+/// A servo restarted after it adopted a stiffer contact carries on bit for bit: the adopted
+/// stiffness, β, the damping, the dither's bound and the fit come back with it.
+#[test]
+fn a_restarted_servo_keeps_what_it_learnt_of_its_contact() {
+    let mut cfg = SimConfig::default();
+    cfg.plant.contact.interaction_stiffness_n_per_m = 1e6;
+    let mut a = Lockstep::new(&cfg).unwrap();
+    let mut b = Lockstep::new(&cfg).unwrap();
+    for sim in [&mut a, &mut b] {
+        sim.servo_mut().hybrid_mut().set_velocity(0.005);
+        sim.run(5_000);
+        assert_eq!(sim.servo().stiffness_adoptions(), 1);
+    }
+    b.restart_servo().unwrap();
+    assert_eq!(a.servo().amplitude_bound(), b.servo().amplitude_bound());
+    assert_eq!(a.servo().normal_damping(), b.servo().normal_damping());
+    for k in 0..5_000 {
+        a.step();
+        b.step();
+        assert_eq!(a.truth(), b.truth(), "tick {k} after the restart");
     }
 }
 

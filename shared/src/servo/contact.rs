@@ -1,7 +1,7 @@
 //! The servo learns its contact: the normal stiffness fitted on line from the encoders and the
-//! sensor ([`crate::contact`]), and the gains that depend on it (the Hooke's-law stiffness, the
-//! rate feedforward β, the contact mode's damping) re-derived when the fit is tight and far
-//! from the stiffness in use (docs/contact.md, *Knowing the contact*).
+//! sensor ([`crate::contact`]), and what depends on it (the Hooke's-law stiffness, the rate
+//! feedforward β, the contact mode's damping, the dither's amplitude bound) re-derived when the
+//! fit is tight and far from the stiffness in use (docs/contact.md, *Knowing the contact*).
 
 use super::{ServoCore, contact_damping};
 use crate::contact::{StiffnessEstimate, StiffnessFitState};
@@ -68,6 +68,10 @@ impl ServoCore {
         self.normal_damping = c.normal_damping_n_s_per_m;
         self.stiffness.restore(&c.fit);
         self.stiffness_frame = *self.hybrid.frame();
+        if c.adopted > 0 {
+            // The bound follows the adopted stiffness (the dither's own state comes after).
+            self.derive_amplitude_bound();
+        }
     }
 
     /// Feeds the fit the tool's encoder position in the task frame and the measured normal
@@ -121,6 +125,20 @@ impl ServoCore {
             servo_damping,
         );
         self.adopted = self.adopted.saturating_add(1);
+        self.derive_amplitude_bound();
+    }
+
+    /// The dither's amplitude bound for the stiffness in use, and the tuner's Aω range with it;
+    /// a dither above the new bound is brought down to it.
+    pub(super) fn derive_amplitude_bound(&mut self) {
+        // As at the start: the configured preload, the stiffness now in use.
+        let stiffness = self.hybrid.params().stiffness_estimate_n_per_m;
+        let preload = self.params.hybrid.preload_n;
+        self.amplitude_bound = self.params.dither.amplitude_bound(preload, stiffness);
+        self.ctx.a_max = self.amplitude_bound * self.ctx.omega;
+        let a = self.dither.velocity_amplitude();
+        self.dither
+            .set_velocity_amplitude(a.min(self.ctx.a_max), self.amplitude_bound);
     }
 }
 
