@@ -4,8 +4,8 @@
 //! fit is tight and far from the stiffness in use (docs/contact.md, *Knowing the contact*).
 
 use super::{ServoCore, contact_damping};
+use crate::arm::Pose;
 use crate::contact::{StiffnessEstimate, StiffnessFitState};
-use crate::math::Vec2;
 use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
@@ -15,15 +15,15 @@ use serde::Serialize;
 /// error honest.
 const SAMPLE_PERIOD_S: f64 = 1e-3;
 /// Effective samples (0.1 s at 1 kHz) before the fit may be adopted.
-const MIN_SAMPLES: f64 = 100.0;
+pub(crate) const MIN_SAMPLES: f64 = 100.0;
 /// The fit is adopted only when its relative standard error is below this ...
-const MAX_RELATIVE_ERROR: f64 = 0.1;
+pub(crate) const MAX_RELATIVE_ERROR: f64 = 0.1;
 /// ... and it is this many times the stiffness in use or more. Only a stiffer contact than
 /// assumed threatens the loop (β and the damping were set for a softer one); a softer one only
 /// slows it (thesis §3.2). Away from the probes, the fit's tight readings on the default set-up
 /// stayed below 0.5 times the truth (fig. 5.3's preliminary method, which drives the normal
 /// set-point by position), docs/contact.md.
-const ADOPT_FACTOR: f64 = 4.0;
+pub(crate) const ADOPT_FACTOR: f64 = 4.0;
 
 wire_struct! {
     /// What the servo knows of its contact, for a snapshot.
@@ -74,10 +74,10 @@ impl ServoCore {
         }
     }
 
-    /// Feeds the fit the tool's encoder position in the task frame and the measured normal
-    /// force, and adopts the fit when it is tight and far from the stiffness in use. A re-based
-    /// frame restarts the fit (its coordinates jump).
-    pub(super) fn observe_contact(&mut self, dt: f64, tip: Vec2, normal_n: f64) {
+    /// Feeds the fit the tool's encoder position (at the measured `pose`) in the task frame and
+    /// the measured normal force, and adopts the fit when it is tight and far from the stiffness
+    /// in use. A re-based frame restarts the fit (its coordinates jump).
+    pub(super) fn observe_contact(&mut self, dt: f64, pose: &Pose, normal_n: f64) {
         let every = (SAMPLE_PERIOD_S / dt).round().max(1.0) as u32;
         self.contact_phase += 1;
         if self.contact_phase < every {
@@ -89,7 +89,7 @@ impl ServoCore {
             self.stiffness.reset();
             self.stiffness_frame = frame;
         }
-        let r = tip - frame.origin;
+        let r = self.arm.forward_at(pose) - frame.origin;
         let x = -r.dot(&frame.normal());
         self.stiffness
             .push(dt * f64::from(every), x, r.dot(&frame.tangent()), normal_n);

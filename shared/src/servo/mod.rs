@@ -14,7 +14,7 @@
 //! | `safe` | the safe state on untrusted force data |
 //! | `state` | [`ServoState`]: everything that crosses a restart, made of named parts |
 
-mod contact;
+pub(crate) mod contact;
 mod params;
 mod safe;
 mod state;
@@ -496,19 +496,19 @@ impl ServoCore {
         } else {
             Vector2::zeros()
         };
+        // The Jacobian at the measured pose: the preload's feedforward, the contact mode's
+        // damping and the tuner's tangential velocity.
+        let j = self.arm.jacobian_at(&pose);
+        let n_hat = self.hybrid.frame().normal();
         // The preload's feedforward depends on the configuration and the desired force, not on
         // the measurement: it stays on in the safe state (the set-point backs off instead).
         if self.params.preload_feedforward {
-            let n_hat = self.hybrid.frame().normal();
-            feedforward -=
-                self.arm.jacobian_at(&pose).transpose() * (n_hat * self.hybrid.params().preload_n);
+            feedforward -= j.transpose() * (n_hat * self.hybrid.params().preload_n);
         }
         if self.normal_damping > 0.0 {
             // Damps the contact mode: the normal velocity's error against the set-point's own
             // (the force loop's rate), not against a probe stroke's, which presses into the
             // surface on purpose (docs/contact.md).
-            let n_hat = self.hybrid.frame().normal();
-            let j = self.arm.jacobian_at(&pose);
             let error = (j * inp.qd - cmd.velocity + extra.velocity).dot(&n_hat);
             feedforward -= j.transpose() * (n_hat * (self.normal_damping * error));
         }
@@ -521,7 +521,7 @@ impl ServoCore {
         } else {
             1.0
         };
-        let v_tan = (self.arm.jacobian_at(&pose) * inp.qd).dot(&t_hat);
+        let v_tan = (j * inp.qd).dot(&t_hat);
         let f_ref = self.params.friction_model_reference_n;
         let normal = cmd.normal_force_n;
         let ratio = if normal > 0.2 * f_ref {
@@ -535,7 +535,7 @@ impl ServoCore {
             self.check_triggers(dt, normal);
             self.guard_contact(dt, normal);
             if self.mode == ServoMode::Track {
-                self.observe_contact(dt, self.arm.forward_at(&pose), normal);
+                self.observe_contact(dt, &pose, normal);
             }
         }
         if self.tuning && valid && !safe && nominal > 0.0 && self.mode == ServoMode::Track {
