@@ -39,6 +39,12 @@ pub struct InsertionOptions {
     /// tilt is measured against the hole's axis) or `unknown` (the robot's frame is turned by
     /// the angle error, and the controller estimates the face's tangent).
     pub part_frame: PartFrame,
+    /// The holding compliance: the wrist's translational stiffness k_x = k_y (N/m). A robot
+    /// under impedance control is this wrist; its rotational stiffness k_θ scales with it
+    /// (k_θ = k_x · 2.5e-3 m², the default's 5 N·m/rad at 2 kN/m) unless set below.
+    pub wrist_stiffness_n_per_m: f64,
+    /// The wrist's rotational stiffness k_θ (N·m/rad); None: scaled with k_x as above.
+    pub wrist_rotational_stiffness_nm_per_rad: Option<f64>,
 }
 
 /// What the robot knows of the part's orientation (docs/insertion-frame.md).
@@ -82,9 +88,16 @@ impl Default for InsertionOptions {
             force_limit_factor: 3.0,
             drive: Drive::Ideal,
             part_frame: PartFrame::Known,
+            wrist_stiffness_n_per_m: DEFAULT_WRIST_N_PER_M,
+            wrist_rotational_stiffness_nm_per_rad: None,
         }
     }
 }
+
+/// The default wrist's translational stiffness (N/m) and the length² that turns it into the
+/// rotational one (m²): 2 kN/m and 5 N·m/rad, a servo wrist at the gripper.
+const DEFAULT_WRIST_N_PER_M: f64 = 2e3;
+const WRIST_ROTATION_M2: f64 = 5.0 / DEFAULT_WRIST_N_PER_M;
 
 impl InsertionOptions {
     /// Checks the settings.
@@ -96,6 +109,18 @@ impl InsertionOptions {
             ("insertion.mu", self.mu, 2.0, false),
             ("insertion.chamfer_mm", self.chamfer_mm, 3.0, true),
             ("insertion.time_limit_s", self.time_limit_s, 600.0, false),
+            (
+                "insertion.wrist_stiffness_n_per_m",
+                self.wrist_stiffness_n_per_m,
+                1e7,
+                false,
+            ),
+            (
+                "insertion.wrist_rotational_stiffness_nm_per_rad",
+                self.wrist_rotational_stiffness_nm_per_rad.unwrap_or(1.0),
+                1e5,
+                false,
+            ),
         ];
         for (name, v, max, zero_ok) in rules {
             if !(v.is_finite() && (v > 0.0 || zero_ok && v == 0.0) && v < max) {
@@ -128,6 +153,11 @@ impl InsertionOptions {
         params.geometry.clearance_ratio = self.clearance_ratio;
         params.geometry.chamfer_m = self.chamfer_mm * 1e-3;
         params.friction = params.friction.scaled(self.mu / params.mu());
+        let k = self.wrist_stiffness_n_per_m;
+        let k_theta = self
+            .wrist_rotational_stiffness_nm_per_rad
+            .unwrap_or(k * WRIST_ROTATION_M2);
+        params.wrist_stiffness = [k, k, k_theta];
         params
     }
 

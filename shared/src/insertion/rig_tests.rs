@@ -240,3 +240,44 @@ fn no_dither_stalls_on_mujocos_face_at_mu_0_3_and_walks_at_0_5() {
         }
     }
 }
+
+/// The wrist's stiffness is a setting (the holding compliance, docs/insertion.md *The
+/// wrist's stiffness*): it reaches the plant's wrist and the controller's gains, k_θ scales
+/// with it unless set, and a stiffness that is not a positive number is refused by name.
+#[test]
+fn the_wrist_stiffness_is_a_setting_the_rig_uses() {
+    let o = InsertionOptions {
+        wrist_stiffness_n_per_m: 2e4,
+        ..InsertionOptions::default()
+    };
+    assert_eq!(o.peg_params().wrist_stiffness, [2e4, 2e4, 50.0]);
+    let set = InsertionOptions {
+        wrist_rotational_stiffness_nm_per_rad: Some(7.0),
+        ..o
+    };
+    assert_eq!(set.peg_params().wrist_stiffness, [2e4, 2e4, 7.0]);
+    // The rig runs on it: a stiffer wrist presses the peg onto the face with the same
+    // commanded force but less deflection, so the first second differs from the default's.
+    let run = |o: &InsertionOptions| {
+        let mut rig = InsertionRig::new(o, 1).unwrap();
+        while rig.time_s() < 0.6 {
+            let w = rig.sensor_wrench();
+            rig.step(Some(w), 1e-4);
+        }
+        rig.truth().pose
+    };
+    assert_ne!(run(&o), run(&InsertionOptions::default()));
+    for bad in [0.0, -1.0, f64::NAN, 1e9] {
+        let o = InsertionOptions {
+            wrist_stiffness_n_per_m: bad,
+            ..InsertionOptions::default()
+        };
+        let e = o.validate().unwrap_err().to_string();
+        assert!(e.contains("insertion.wrist_stiffness_n_per_m"), "{e}");
+        let o = InsertionOptions {
+            wrist_rotational_stiffness_nm_per_rad: Some(bad),
+            ..InsertionOptions::default()
+        };
+        assert!(o.validate().is_err(), "k_θ = {bad} was accepted");
+    }
+}
