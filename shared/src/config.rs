@@ -28,6 +28,10 @@ pub struct SimConfig {
     pub start_u_m: f64,
     /// Error of the initial tangent estimate (rad): estimate = true tangent + this.
     pub tangent_error_rad: f64,
+    /// How far off the surface the tool starts, along its normal (m): 0 starts it pressed in at
+    /// the preload; more starts it free, and the servo approaches (docs/contact.md, *First
+    /// touch*).
+    pub start_gap_m: f64,
     /// Seed of the sensor noise.
     pub seed: u64,
     /// Which world the servo drives (builtin or MuJoCo).
@@ -54,6 +58,7 @@ impl Default for SimConfig {
             servo: ServoParams::default(),
             start_u_m: 0.0,
             tangent_error_rad: 0.0,
+            start_gap_m: 0.0,
             seed: 1,
             world: WorldConfig::default(),
             insertion: InsertionOptions::default(),
@@ -76,6 +81,13 @@ impl SimConfig {
                 "must be finite",
             ));
         }
+        if !(self.start_gap_m.is_finite() && (0.0..=0.05).contains(&self.start_gap_m)) {
+            return Err(ConfigError::setting(
+                "start_gap_m",
+                self.start_gap_m,
+                "must lie in [0, 0.05] m (0: start pressed in at the preload)",
+            ));
+        }
         if self.tangent_error_rad.abs() > 0.5 {
             return Err(ConfigError::setting(
                 "tangent_error_rad",
@@ -96,13 +108,18 @@ impl SimConfig {
         p
     }
 
-    /// The joint angles that put the tool at the start point pressed in to the preload.
+    /// The joint angles that put the tool at the start point: pressed in to the preload, or
+    /// `start_gap_m` off the surface.
     pub fn start_configuration(&self) -> Result<nalgebra::Vector2<f64>, ConfigError> {
         let arm = Arm::new(self.plant.arm);
         let on_surface = self.surface.point_at(self.start_u_m);
         let angle = self.surface.tangent_angle_at(self.start_u_m);
         let normal = crate::math::perp(crate::math::unit(angle));
-        let depth = self.servo.hybrid.preload_n / self.plant.contact.stiffness();
+        let depth = if self.start_gap_m > 0.0 {
+            -self.start_gap_m
+        } else {
+            self.servo.hybrid.preload_n / self.plant.contact.stiffness()
+        };
         let tip: Vec2 = on_surface - normal * depth;
         Ok(arm.inverse(tip, self.plant.elbow)?)
     }

@@ -207,6 +207,9 @@ pub struct HybridController {
     /// β: the fraction of the force loop's set-point rate fed forward as a velocity
     /// ([`rate_feedforward_fraction`]).
     rate_feedforward: f64,
+    /// The normal set-point's rate limit in force (m/s): `max_normal_rate_m_per_s`, or a
+    /// guarded approach's speed ([`Self::set_rate_limit`]).
+    rate_limit: f64,
 }
 
 impl HybridController {
@@ -229,6 +232,7 @@ impl HybridController {
             depth: 0.0,
             depth_rate: 0.0,
             rate_feedforward: 1.0,
+            rate_limit: params.max_normal_rate_m_per_s,
         };
         c.set_stiffness_estimate(
             params.stiffness_estimate_n_per_m,
@@ -383,8 +387,17 @@ impl HybridController {
     pub fn depth_rate_for(&self, normal: f64) -> f64 {
         let omega = std::f64::consts::TAU * self.params.force_bandwidth_hz;
         let rate = omega * (self.params.preload_n - normal) / self.hooke_stiffness;
-        let lim = self.params.max_normal_rate_m_per_s;
+        let lim = self.rate_limit;
         rate.clamp(-lim, lim)
+    }
+
+    /// Limits the normal set-point's rate to `limit` (m/s), at most `max_normal_rate_m_per_s`:
+    /// a guarded approach's speed, or the settings' limit again. Ignored unless finite and
+    /// positive.
+    pub fn set_rate_limit(&mut self, limit: f64) {
+        if limit.is_finite() && limit > 0.0 {
+            self.rate_limit = limit.min(self.params.max_normal_rate_m_per_s);
+        }
     }
 
     /// Normal set-point into the surface since the frame was last re-based (m).

@@ -98,13 +98,13 @@ pub struct TrackingRun {
     /// When and where the worst period-averaged deviation happened (s, m).
     #[serde(deserialize_with = "crate::nan::pair_or_null")]
     pub worst_normal_at: [f64; 2],
-    /// RMS of the period-averaged |F_N − preload| / preload after 0.5 s.
+    /// RMS of the period-averaged |F_N − preload| / preload from 0.5 s after the first touch.
     #[serde(deserialize_with = "crate::nan::or_null")]
     pub normal_deviation_rms: f64,
     /// Smallest and largest instantaneous true normal force after 0.5 s, ripple included (N).
     #[serde(deserialize_with = "crate::nan::pair_or_null")]
     pub instantaneous_normal_range_n: [f64; 2],
-    /// Servo ticks without contact.
+    /// Servo ticks without contact, from the first touch on.
     pub ticks_without_contact: usize,
     /// Estimation counters.
     pub estimations: EstimationCounters,
@@ -139,6 +139,10 @@ pub struct TrackingMonitor {
     dev_sq: f64,
     dev_n: f64,
     lost: usize,
+    /// When the tool first touched (s): 0 when it starts in contact; the normal force is
+    /// judged from 0.5 s after it, and ticks without contact counted from it (a run that
+    /// starts off the surface approaches first, docs/contact.md *First touch*).
+    touched_at: Option<f64>,
     u0: Option<f64>,
     last: MonitorTick,
     ticks: u64,
@@ -163,6 +167,7 @@ impl TrackingMonitor {
             dev_sq: 0.0,
             dev_n: 0.0,
             lost: 0,
+            touched_at: None,
             u0: None,
             last: MonitorTick::default(),
             ticks: 0,
@@ -175,6 +180,14 @@ impl TrackingMonitor {
         if self.u0.is_none() {
             self.u0 = Some(m.u);
         }
+        if self.touched_at.is_none() && m.contact {
+            self.touched_at = Some(if self.ticks == 0 { 0.0 } else { m.t });
+        }
+        let Some(touched_at) = self.touched_at else {
+            self.ticks += 1;
+            self.last = *m;
+            return;
+        };
         if !m.contact {
             self.lost += 1;
         }
@@ -185,7 +198,7 @@ impl TrackingMonitor {
             self.max_err = self.max_err.max(err.abs());
         }
         self.period.push(m.normal_true);
-        if m.t >= 0.5 {
+        if m.t >= touched_at + 0.5 {
             let mean = self.period.mean();
             let dev = (mean - self.preload).abs() / self.preload;
             self.dev_sq += dev * dev;
@@ -230,5 +243,45 @@ impl TrackingMonitor {
             estimates: Vec::new(),
             samples: self.samples.clone(),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A run that starts off the surface is judged from its first touch: the approach's ticks
+    /// are not ticks without contact, and the normal force counts from 0.5 s after the touch;
+    /// a contact lost after the touch still counts.
+    #[test]
+    fn a_run_is_judged_from_its_first_touch() {
+        let preload = 2.5;
+        let mut m = TrackingMonitor::new(preload, 10);
+        let dt = 1e-3;
+        for k in 0..3000 {
+            let t = f64::from(k) * dt;
+            let contact = t >= 1.0 && !(2.0..2.005).contains(&t);
+            m.push(&MonitorTick {
+                t,
+                contact,
+                // The force builds over 0.3 s after the touch.
+                normal_true: if contact {
+                    preload * ((t - 1.0) / 0.3).min(1.0)
+                } else {
+                    0.0
+                },
+                ..MonitorTick::default()
+            });
+        }
+        let run = m.finish(EstimationCounters::default());
+        assert_eq!(run.ticks_without_contact, 5);
+        // The only deviation judged is the 5-ms loss at 2 s, not the approach's second nor the
+        // force building after the touch.
+        assert!(run.worst_normal_at[0] >= 2.0, "{:?}", run.worst_normal_at);
+        assert!(
+            run.normal_deviation_rms < 0.1,
+            "{}",
+            run.normal_deviation_rms
+        );
     }
 }

@@ -340,3 +340,105 @@ fn stiffness_fit_table() {
         println!("told 10 kN/m on 1 MN/m, adaptation {adapt}: F_N {lo:.2}–{hi:.2} N at rest");
     }
 }
+
+/// A set-up whose tool starts `gap_m` off a contact of stiffness `k_e` (N/m), at `rate_hz`;
+/// the servo is told the default 10 kN/m.
+fn off_the_surface(k_e: f64, rate_hz: f64, gap_m: f64) -> SimConfig {
+    let mut cfg = SimConfig::default();
+    cfg.plant.contact.interaction_stiffness_n_per_m = k_e;
+    cfg.servo.rate_hz = rate_hz;
+    cfg.start_gap_m = gap_m;
+    cfg
+}
+
+/// The first touch (docs/contact.md, *First touch*): from 1 mm off the surface the guarded
+/// approach touches foam and steel alike with a peak under twice the preload, no bounce, and
+/// the preload settled, at 10 kHz and at 500 Hz. Approached as if the stiffest contact were
+/// 10 kN/m (10 times faster), steel's impact is about 10 times the preload and the tool
+/// bounces: the checks fail.
+#[test]
+fn a_first_touch_stays_under_twice_the_preload_at_any_stiffness() {
+    use crate::experiments::{Options, touch};
+    let run = |cfg: SimConfig| {
+        let o = Options {
+            base: cfg,
+            ..Options::default()
+        };
+        touch(&o).unwrap()
+    };
+    for (k_e, rate) in [(1e3, 10_000.0), (1e6, 10_000.0), (1e3, 500.0), (1e6, 500.0)] {
+        let out = run(off_the_surface(k_e, rate, 1e-3));
+        let peak = out.summary.peak_normal_n / out.summary.preload_n;
+        assert!(out.passed(), "{k_e:e} N/m at {rate} Hz: {:?}", out.checks);
+        assert!(out.summary.touch_s.is_some() && peak > 0.9, "peak {peak}");
+        assert_eq!(out.summary.adoptions, 1, "the fit replaces the assumption");
+    }
+    let mut fast = off_the_surface(1e6, 10_000.0, 1e-3);
+    fast.servo.approach.stiffest_contact_n_per_m = 1e4;
+    let out = run(fast);
+    let failed: Vec<_> = out
+        .checks
+        .iter()
+        .filter(|c| !c.pass)
+        .map(|c| &c.id)
+        .collect();
+    assert_eq!(
+        failed,
+        ["peak_over_preload", "ticks_without_contact_after_touch"],
+        "peak {} N",
+        out.summary.peak_normal_n
+    );
+}
+
+/// A servo restarted during the approach, and again just after the touch while its gains are
+/// still the approach's assumption, carries on bit for bit: the mode, the provisional gains
+/// and the fit cross the restart.
+#[test]
+fn a_servo_restarted_mid_approach_carries_on_bit_for_bit() {
+    use crate::servo::ServoMode;
+    let cfg = off_the_surface(1e6, 10_000.0, 0.5e-3);
+    let mut a = Lockstep::new(&cfg).unwrap();
+    let mut b = Lockstep::new(&cfg).unwrap();
+    assert_eq!(a.servo().mode(), ServoMode::Approach);
+    let mut restarted = [false; 2];
+    for k in 0..40_000 {
+        let approaching = b.servo().mode() == ServoMode::Approach;
+        let settling = b.servo().mode() == ServoMode::Resuming;
+        if (approaching && k == 5_000 && !restarted[0]) || (settling && !restarted[1]) {
+            b.restart_servo().unwrap();
+            restarted[usize::from(settling)] = true;
+            assert_eq!(a.servo().normal_damping(), b.servo().normal_damping());
+            assert_eq!(a.servo().amplitude_bound(), b.servo().amplitude_bound());
+        }
+        a.step();
+        b.step();
+        assert_eq!(a.truth(), b.truth(), "tick {k}");
+    }
+    assert_eq!(restarted, [true, true]);
+    assert_eq!(b.servo().mode(), ServoMode::Track);
+    assert_eq!(b.servo().stiffness_adoptions(), 1);
+}
+
+/// A gap or an approach setting that is not a number in range is refused by name.
+#[test]
+fn bad_approach_settings_are_refused_by_name() {
+    for (gap, name) in [
+        (-1e-3, "start_gap_m"),
+        (f64::NAN, "start_gap_m"),
+        (1.0, "start_gap_m"),
+    ] {
+        let cfg = SimConfig {
+            start_gap_m: gap,
+            ..SimConfig::default()
+        };
+        let e = cfg.validate().unwrap_err().to_string();
+        assert!(e.contains(name), "{e}");
+    }
+    for (k, f) in [(0.0, 0.5), (f64::NAN, 0.5), (1e6, 0.0), (1e6, 1.0)] {
+        let mut cfg = SimConfig::default();
+        cfg.servo.approach.stiffest_contact_n_per_m = k;
+        cfg.servo.approach.touch_fraction = f;
+        let e = cfg.validate().unwrap_err().to_string();
+        assert!(e.contains("servo.approach."), "{e}");
+    }
+}

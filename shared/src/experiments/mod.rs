@@ -16,6 +16,7 @@ mod multicontact;
 mod nominal;
 mod recursive;
 mod suppression;
+mod touch;
 mod tracking;
 mod tuning;
 
@@ -27,6 +28,7 @@ pub use multicontact::*;
 pub use nominal::*;
 pub use recursive::*;
 pub use suppression::*;
+pub use touch::*;
 pub use tracking::*;
 pub use tuning::*;
 
@@ -133,6 +135,7 @@ registry! {
     "fig5.3", "fig. 5.3", false, fig5_3, "the preliminary correlation method vs the dither method";
     "fig5.6", "fig. 5.6", false, fig5_6, "tracking an unknown sinusoidal surface";
     "corners", "§5.2, §7.2", false, corners, "tracking a piecewise-linear surface through its corners";
+    "touch", "§3.3 (first contact)", false, touch, "from off the surface: the guarded approach, the impact and the preload settled";
     "fig5.9", "figs. 5.9, 5.10", false, fig5_9, "a box rotated into a corner about its estimated rotation centre";
     "insertion", "§5.4 (later study)", false, insertion, "a peg into a hole from initial errors: dither, no-dither or search";
 }

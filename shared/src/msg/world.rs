@@ -144,12 +144,12 @@ impl From<&DriverMemoMsg> for DriverMemo {
 }
 
 wire_message! {
-    version = 10;
+    version = 11;
     /// The world's state the servo keeps in the supervisor's blackboard so that a restarted
     /// servo resumes the world, its controller and its counts where they were (one entry per
     /// servo incarnation of [`service::WORLD`](super::service::WORLD)).
     #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
-    #[type_name("afs::WorldSnapshot.v10")]
+    #[type_name("afs::WorldSnapshot.v11")]
     pub struct WorldSnapshot {
         /// The layout version, `Self::VERSION`; 0 means "no snapshot yet".
         pub version: u32,

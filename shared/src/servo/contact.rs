@@ -3,7 +3,7 @@
 //! feedforward β, the contact mode's damping, the dither's amplitude bound) re-derived when the
 //! fit is tight and far from the stiffness in use (docs/contact.md, *Knowing the contact*).
 
-use super::{ServoCore, contact_damping};
+use super::{ServoCore, ServoMode, contact_damping};
 use crate::arm::Pose;
 use crate::contact::{StiffnessEstimate, StiffnessFitState};
 use iceoryx2_bb_derive_macros::ZeroCopySend;
@@ -24,6 +24,9 @@ pub(crate) const MAX_RELATIVE_ERROR: f64 = 0.1;
 /// stayed below 0.5 times the truth (fig. 5.3's preliminary method, which drives the normal
 /// set-point by position), docs/contact.md.
 pub(crate) const ADOPT_FACTOR: f64 = 4.0;
+/// After a guarded approach, the fit takes samples from this fraction of the preload up: the
+/// contact is then certain (the sensor's noise is a hundredth of it).
+const FIT_FROM_FRACTION: f64 = 0.2;
 
 wire_struct! {
     /// What the servo knows of its contact, for a snapshot.
@@ -38,6 +41,12 @@ wire_struct! {
         pub normal_damping_n_s_per_m: f64,
         /// The stiffness fit's memory.
         pub fit: StiffnessFitState,
+        /// 1 while the gains are the guarded approach's (set for the stiffest contact
+        /// expected) and the fit's first tight reading is to be adopted whichever way it
+        /// lies; 0 otherwise.
+        pub provisional: u32,
+        /// Zero (padding; a later field).
+        pub reserved: u32,
     }
 }
 
@@ -59,6 +68,8 @@ impl ServoCore {
             phase: self.contact_phase,
             normal_damping_n_s_per_m: self.normal_damping,
             fit: self.stiffness.state(),
+            provisional: u32::from(self.provisional),
+            reserved: 0,
         }
     }
 
@@ -68,7 +79,8 @@ impl ServoCore {
         self.normal_damping = c.normal_damping_n_s_per_m;
         self.stiffness.restore(&c.fit);
         self.stiffness_frame = *self.hybrid.frame();
-        if c.adopted > 0 {
+        self.provisional = c.provisional != 0;
+        if c.adopted > 0 || self.provisional {
             // The bound follows the adopted stiffness (the dither's own state comes after).
             self.derive_amplitude_bound();
         }
@@ -101,18 +113,78 @@ impl ServoCore {
         };
         let in_use = self.hybrid.params().stiffness_estimate_n_per_m;
         let k = e.stiffness_n_per_m;
-        if e.samples >= MIN_SAMPLES
-            && e.relative_error() <= MAX_RELATIVE_ERROR
-            && k >= ADOPT_FACTOR * in_use
-        {
+        let tight = e.samples >= MIN_SAMPLES && e.relative_error() <= MAX_RELATIVE_ERROR;
+        // The approach's gains were an assumption, not a reading: the first tight fit
+        // replaces them whichever way it lies.
+        if tight && (self.provisional || k >= ADOPT_FACTOR * in_use) {
+            self.provisional = false;
             self.adopt_stiffness(k);
         }
     }
 
-    /// Re-derives the gains that depend on the contact's stiffness for `stiffness` (N/m).
+    /// Whether the fit observes this tick: while tracking, and after the first touch while
+    /// the approach's gains are provisional (the settling of the preload compresses the
+    /// contact, the reading the fit needs); free-flight samples would read no stiffness.
+    pub(super) fn observes_contact(&self, normal_n: f64) -> bool {
+        match self.mode {
+            ServoMode::Track => true,
+            ServoMode::Approach | ServoMode::Resuming => {
+                self.provisional && normal_n >= FIT_FROM_FRACTION * self.hybrid.params().preload_n
+            }
+            _ => false,
+        }
+    }
+
+    /// The guarded approach's gains: the contact-dependent ones (β, the contact mode's damping,
+    /// the dither's bound) for the stiffest contact expected, provisional until the fit reads
+    /// the contact.
+    pub(super) fn assume_stiffest_contact(&mut self) {
+        let k = self
+            .params
+            .approach
+            .stiffest_contact_n_per_m
+            .max(self.params.hybrid.stiffness_estimate_n_per_m);
+        self.use_stiffness(k);
+        self.provisional = true;
+    }
+
+    /// The guarded approach's tick (mode [`ServoMode::Approach`]): the tangential motion is held
+    /// (a velocity asked for is kept for after the touch), and a normal force of
+    /// `touch_fraction` of the preload ends it; the servo then settles the preload as after an
+    /// estimate (`Resuming`) and moves on.
+    pub(super) fn approach(&mut self, force: crate::math::Vec2) {
+        let wanted = self.hybrid.velocity_target();
+        if wanted != 0.0 {
+            self.track.resume_velocity_m_per_s = wanted;
+            self.hybrid.set_velocity(0.0);
+        }
+        let preload = self.hybrid.params().preload_n;
+        if force.dot(&self.hybrid.frame().normal()) >= self.params.approach.touch_fraction * preload
+        {
+            self.mode = ServoMode::Resuming;
+            self.track.stopped_s = 0.0;
+            self.track.settled_s = 0.0;
+        }
+    }
+
+    /// The guarded approach's speed (m/s).
+    pub fn approach_speed(&self) -> f64 {
+        self.approach_speed
+    }
+
+    /// Re-derives the gains that depend on the contact's stiffness for `stiffness` (N/m), and
+    /// counts an adoption.
     pub fn adopt_stiffness(&mut self, stiffness: f64) {
+        if self.use_stiffness(stiffness) {
+            self.adopted = self.adopted.saturating_add(1);
+        }
+    }
+
+    /// Re-derives the gains that depend on the contact's stiffness for `stiffness` (N/m);
+    /// false (nothing changed) unless it is finite and positive.
+    fn use_stiffness(&mut self, stiffness: f64) -> bool {
         if !(stiffness.is_finite() && stiffness > 0.0) {
-            return;
+            return false;
         }
         let [mass, servo_damping, servo_stiffness] = self.contact_mode;
         self.hybrid
@@ -124,8 +196,8 @@ impl ServoCore {
             mass,
             servo_damping,
         );
-        self.adopted = self.adopted.saturating_add(1);
         self.derive_amplitude_bound();
+        true
     }
 
     /// The dither's amplitude bound for the stiffness in use, and the tuner's Aω range with it;

@@ -21,7 +21,7 @@ mod state;
 mod tracking;
 
 pub use contact::{ContactReport, ContactState};
-pub use params::{SafeParams, ServoParams, TrackingParams};
+pub use params::{ApproachParams, SafeParams, ServoParams, TrackingParams};
 pub use safe::SafeState;
 pub use state::{ServoState, ServoStateFlags, TareState};
 pub use tracking::{EstimationCounters, ProbeRequest, ServoMode, TrackState, Trigger};
@@ -141,6 +141,10 @@ pub struct ServoCore {
     contact_phase: u32,
     /// Times the servo adopted a fitted stiffness.
     adopted: u32,
+    /// The guarded approach's speed (m/s, [`ApproachParams::speed`]).
+    approach_speed: f64,
+    /// The contact-dependent gains are the approach's assumption ([`ContactState::provisional`]).
+    provisional: bool,
 }
 
 /// Probe samples are recorded every this many servo ticks (1 kHz at 10 kHz).
@@ -246,12 +250,19 @@ impl ServoCore {
             tool_mass_kg: params.tool_mass_kg,
         };
         let tuner = Tuner::new(&params.tuner, &ctx, 0.0);
+        // Off the surface (less than the touch's force along the normal): a guarded approach.
+        let mode =
+            if f0.dot(&frame.normal()) < params.approach.touch_fraction * params.hybrid.preload_n {
+                ServoMode::Approach
+            } else {
+                ServoMode::Track
+            };
         let probe_capacity = [params.tangent.first_plan(), params.tangent.reprobe_plan()]
             .iter()
             .map(|p| ProbeRunner::samples_needed(p, params.rate_hz, PROBE_DECIMATION))
             .max()
             .unwrap_or(0);
-        Ok(Self {
+        let mut servo = Self {
             params,
             arm,
             elbow,
@@ -266,7 +277,7 @@ impl ServoCore {
             tare: Wrench::default(),
             last_q_d: q0,
             diag: ServoDiag::default(),
-            mode: ServoMode::Track,
+            mode,
             probe: ProbeRunner::new(probe_capacity, PROBE_DECIMATION),
             reprobe: false,
             force_armed: true,
@@ -296,7 +307,13 @@ impl ServoCore {
             stiffness_frame: frame,
             contact_phase: 0,
             adopted: 0,
-        })
+            approach_speed: params.approach.speed(params.hybrid.preload_n, normal_mass),
+            provisional: false,
+        };
+        if mode == ServoMode::Approach {
+            servo.assume_stiffest_contact();
+        }
+        Ok(servo)
     }
 
     fn to_world(arm: &Arm, q: Vector2<f64>, w: Wrench) -> Vec2 {
@@ -453,6 +470,7 @@ impl ServoCore {
                     self.set_a_omega(a);
                 }
             }
+            Some(ServoMode::Approach) => self.approach(force),
             Some(ServoMode::Probing) => {
                 extra = self.probe.step(dt, force, self.arm.forward_at(&pose));
                 self.last_stroke = extra;
@@ -464,6 +482,12 @@ impl ServoCore {
         }
         let probing = self.mode == ServoMode::Probing;
         let force_loop = valid && self.force_control && !probing;
+        self.hybrid
+            .set_rate_limit(if self.mode == ServoMode::Approach {
+                self.approach_speed
+            } else {
+                self.hybrid.params().max_normal_rate_m_per_s
+            });
         // Frozen integrators make the stroke response stationary (they would otherwise relax a
         // DC offset picked up in the ramp-in over their ~1 s time constant).
         self.pid.set_integrating(!probing);
@@ -534,7 +558,7 @@ impl ServoCore {
         if valid && !safe {
             self.check_triggers(dt, normal);
             self.guard_contact(dt, normal);
-            if self.mode == ServoMode::Track {
+            if self.observes_contact(normal) {
                 self.observe_contact(dt, &pose, normal);
             }
         }

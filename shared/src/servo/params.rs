@@ -56,6 +56,61 @@ pub struct ServoParams {
     pub tracking: TrackingParams,
     /// What to do while the force data cannot be trusted.
     pub safe: SafeParams,
+    /// The guarded approach, when the servo starts off the surface.
+    pub approach: ApproachParams,
+}
+
+/// The guarded approach (docs/contact.md, *First touch*): a servo that starts with a normal
+/// force below `touch_fraction` of the preload is off the surface. Its force loop then moves
+/// the normal set-point at no more than the speed whose impact on the stiffest contact expected
+/// is the preload, `v_a = F_d / √(k_max m_n)` (m_n the arm's effective mass along the normal),
+/// with the tangential motion held; at the touch it settles the preload, then moves on.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ApproachParams {
+    /// The stiffest contact the tool may meet, k_max (N/m): the contact in series with the
+    /// sensor, as the arm sees it.
+    pub stiffest_contact_n_per_m: f64,
+    /// The normal force, as a fraction of the preload, that ends the approach.
+    pub touch_fraction: f64,
+}
+
+impl Default for ApproachParams {
+    fn default() -> Self {
+        Self {
+            stiffest_contact_n_per_m: 1e6,
+            touch_fraction: 0.5,
+        }
+    }
+}
+
+impl ApproachParams {
+    /// Checks the settings; the message names the field.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let k = self.stiffest_contact_n_per_m;
+        if !(k.is_finite() && (1.0..=1e9).contains(&k)) {
+            return Err(ConfigError::setting(
+                "servo.approach.stiffest_contact_n_per_m",
+                k,
+                "must lie in [1, 1e9] N/m",
+            ));
+        }
+        let f = self.touch_fraction;
+        if !(f.is_finite() && f > 0.0 && f < 1.0) {
+            return Err(ConfigError::setting(
+                "servo.approach.touch_fraction",
+                f,
+                "must lie in (0, 1)",
+            ));
+        }
+        Ok(())
+    }
+
+    /// The approach speed `F_d / √(k_max m_n)` (m/s) for the preload `preload_n` (N) and the
+    /// arm's effective mass along the normal `normal_mass_kg` (kg).
+    pub fn speed(&self, preload_n: f64, normal_mass_kg: f64) -> f64 {
+        preload_n / (self.stiffest_contact_n_per_m * normal_mass_kg).sqrt()
+    }
 }
 
 /// The safe state, entered whenever the force data cannot be trusted (stale, missing or
@@ -206,6 +261,7 @@ impl Default for ServoParams {
             tangent: TangentParams::default(),
             tracking: TrackingParams::default(),
             safe: SafeParams::default(),
+            approach: ApproachParams::default(),
         }
     }
 }
@@ -332,6 +388,7 @@ impl ServoParams {
         }
         self.safe.validate()?;
         self.tracking.validate()?;
+        self.approach.validate()?;
         self.tuner.validate()?;
         self.friction_model.validate()?;
         if !(self.friction_model_reference_n.is_finite() && self.friction_model_reference_n > 0.0) {

@@ -27,6 +27,8 @@ wire_code! {
         /// Estimate applied; holding until the normal force is back at the preload, then
         /// moving on.
         Resuming = 4,
+        /// Off the surface: the guarded approach ([`super::ApproachParams`]).
+        Approach = 5,
     }
 }
 
