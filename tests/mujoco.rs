@@ -202,6 +202,36 @@ fn a_users_arm_tracks_the_sinusoid_and_the_flat_surface() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// The first touch on MuJoCo (docs/contact.md, *First touch*): from 1 mm off the surface the
+/// servo's guarded approach touches a lighter user's arm with MuJoCo's default contact
+/// (examples/mujoco/user-arm-default-contact.xml, whose contact the fit reads as about
+/// 1.4e5 N/m) and the generated model's 1 MN/m contact, peaking under twice the preload, with no
+/// bounce and the preload settled.
+#[test]
+fn the_first_touch_holds_on_mujocos_default_contact() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let model = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/examples/mujoco/user-arm-default-contact.xml"
+    );
+    let mut users = options(WorldKind::Mujoco, 10_000.0);
+    users.base.world.mjcf = Some(model.into());
+    let mut steel = options(WorldKind::Mujoco, 10_000.0);
+    steel.base.plant.contact.interaction_stiffness_n_per_m = 1e6;
+    for (what, o) in [("the user's arm", users), ("1 MN/m", steel)] {
+        let out = experiments::touch(&o).unwrap();
+        for id in [
+            "peak_over_preload",
+            "ticks_without_contact_after_touch",
+            "final_force_error",
+            "tracking",
+        ] {
+            passed(&out.checks, id, what);
+        }
+        assert!(out.summary.stiffness_in_use_n_per_m > 5e4, "{what}");
+    }
+}
+
 /// A model that lacks what afs needs is refused before anything runs, exit 2, with what is
 /// missing named.
 #[test]
