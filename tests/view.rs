@@ -194,6 +194,17 @@ fn a_foxglove_client_receives_what_the_recording_holds_and_a_stalled_one_disturb
     };
     assert!(common("/servo", "/live") * 10 >= ticks["/live"].len() * 9);
     assert!(common("/servo", "/plant") * 10 >= ticks["/plant"].len() * 9);
+    // `/contact`, what the servo knows of its contact, about ten times a second from its
+    // snapshots: the default contact, never re-learnt, with the fit beside it.
+    let contact = &recording["/contact"];
+    assert!(contact.len() >= 20, "{} /contact records", contact.len());
+    let last = contact.last().unwrap();
+    assert_eq!(last["stiffness_in_use_n_per_m"], 10e3, "{last}");
+    assert_eq!(
+        (last["adoptions"].as_u64(), last["provisional"].as_bool()),
+        (Some(0), Some(false))
+    );
+    assert!(last["seq"].as_u64().unwrap() > 50_000, "{last}");
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -2,7 +2,7 @@
 //! topic list with each message's type name ([`TOPICS`]), and each topic's JSON schema from
 //! the message's byte layout. The recording, the live view and the follower share it.
 
-use afs_shared::live::{InsertionLive, LiveSample};
+use afs_shared::live::{ContactLive, InsertionLive, LiveSample};
 use afs_shared::msg::{
     self, FrictionReport, LoopStats, PlantSample, SensorStats, ServoSample, SupervisorStatus,
     WrenchSample,
@@ -30,10 +30,15 @@ pub enum Rec {
     Live(LiveSample),
     /// `/insertion`: an insertion tick's display record (`insertion` scenario).
     Insertion(InsertionLive),
+    /// `/contact`: what the servo knows of its contact, from its newest snapshot.
+    Contact(ContactLive),
 }
 
+/// How often the `/contact` record is made from the servo's newest world snapshot.
+pub const CONTACT_EVERY: std::time::Duration = std::time::Duration::from_millis(100);
+
 /// The topics, in channel order: (topic, message type name).
-pub const TOPICS: [(&str, &str); 9] = [
+pub const TOPICS: [(&str, &str); 10] = [
     ("/plant", "afs::PlantSample"),
     ("/servo", "afs::ServoSample.v3"),
     ("/wrench", "afs::WrenchSample"),
@@ -43,6 +48,7 @@ pub const TOPICS: [(&str, &str); 9] = [
     ("/sensor_stats", "afs::SensorStats"),
     ("/live", "afs::LiveSample"),
     ("/insertion", "afs::InsertionLive"),
+    ("/contact", "afs::ContactLive"),
 ];
 
 impl Rec {
@@ -58,6 +64,7 @@ impl Rec {
             Rec::SensorStats(_) => 6,
             Rec::Live(_) => 7,
             Rec::Insertion(_) => 8,
+            Rec::Contact(_) => 9,
         }
     }
 
@@ -73,6 +80,7 @@ impl Rec {
             Rec::SensorStats(s) => s.publish_ns,
             Rec::Live(s) => s.publish_ns,
             Rec::Insertion(s) => s.publish_ns,
+            Rec::Contact(s) => s.publish_ns,
         }
     }
 
@@ -91,6 +99,7 @@ impl Rec {
             Rec::SensorStats(s) => j(s),
             Rec::Live(s) => j(s),
             Rec::Insertion(s) => j(s),
+            Rec::Contact(s) => j(s),
         }
     }
 }
@@ -108,6 +117,9 @@ pub fn json_schema(type_name: &str) -> String {
     }
     if type_name == "afs::InsertionLive" {
         return serde_schema(type_name, &InsertionLive::default()).to_string();
+    }
+    if type_name == "afs::ContactLive" {
+        return serde_schema(type_name, &ContactLive::default()).to_string();
     }
     let layouts = msg::layouts();
     let Some(l) = layouts.iter().find(|l| l.type_name == type_name) else {
@@ -157,7 +169,7 @@ fn serde_schema<T: Serialize>(title: &str, sample: &T) -> serde_json::Value {
 #[cfg(test)]
 mod schema_tests {
     use super::{TOPICS, json_schema};
-    use afs_shared::live::{InsertionLive, LiveSample};
+    use afs_shared::live::{ContactLive, InsertionLive, LiveSample};
     /// Every topic's schema lists exactly the fields its JSON carries, typed as they serialise.
     #[test]
     fn every_schema_types_the_fields_its_messages_carry() {
@@ -182,6 +194,14 @@ mod schema_tests {
         assert_eq!(props["phase"]["type"], "integer");
         assert_eq!(props["depth_mm"]["type"], "number");
         assert_eq!(props["force_valid"]["type"], "boolean");
+        let contact = serde_json::to_value(ContactLive::default()).unwrap();
+        let schema: serde_json::Value =
+            serde_json::from_str(&json_schema("afs::ContactLive")).unwrap();
+        let props = schema["properties"].as_object().unwrap();
+        assert_eq!(props.len(), contact.as_object().unwrap().len());
+        assert_eq!(props["stiffness_in_use_n_per_m"]["type"], "number");
+        assert_eq!(props["adoptions"]["type"], "integer");
+        assert_eq!(props["provisional"]["type"], "boolean");
     }
 
     /// Each topic's type name is its message's iceoryx2 type name (with its version).
@@ -190,7 +210,7 @@ mod schema_tests {
         let layouts = afs_shared::msg::layouts();
         for (topic, ty) in TOPICS
             .iter()
-            .filter(|t| t.0 != "/live" && t.0 != "/insertion")
+            .filter(|t| !["/live", "/insertion", "/contact"].contains(&t.0))
         {
             assert!(
                 layouts

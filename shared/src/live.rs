@@ -192,3 +192,94 @@ impl InsertionLive {
         }
     }
 }
+
+/// What the servo knows of its contact, for display (the `/contact` topic, a few times a
+/// second): read from its newest world snapshot, so it costs the servo nothing. Units are in
+/// the field names; a figure not determined yet is NaN (null in JSON).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct ContactLive {
+    /// Servo tick of the snapshot.
+    pub seq: u64,
+    /// Monotonic time the record was made (ns).
+    pub publish_ns: u64,
+    /// Simulated time of the snapshot (s).
+    pub time_s: f64,
+    /// The contact stiffness the gains are derived for (N/m): configured, the approach's
+    /// assumption, or adopted from the fit.
+    pub stiffness_in_use_n_per_m: f64,
+    /// The on-line fit's stiffness (N/m).
+    pub fitted_n_per_m: f64,
+    /// Its standard error (N/m).
+    pub fitted_std_error_n_per_m: f64,
+    /// Times the servo adopted its fit.
+    pub adoptions: u32,
+    /// The gains are still the guarded approach's assumption.
+    pub provisional: bool,
+    /// β, the fraction of the force loop's rate fed forward.
+    pub rate_feedforward: f64,
+    /// Damping added along the normal (N·s/m).
+    pub added_damping_n_s_per_m: f64,
+    /// Controller mode (`ServoMode` wire code; 5 is the approach).
+    pub mode: u32,
+}
+
+impl ContactLive {
+    /// The record of a world snapshot, made at `publish_ns`.
+    pub fn of_snapshot(w: &crate::msg::WorldSnapshot, publish_ns: u64) -> Self {
+        let r = crate::servo::ContactReport::from_state(&w.controller);
+        Self {
+            seq: w.seq,
+            publish_ns,
+            time_s: w.plant.time_s,
+            stiffness_in_use_n_per_m: r.stiffness_in_use_n_per_m,
+            fitted_n_per_m: r.fitted_n_per_m.unwrap_or(f64::NAN),
+            fitted_std_error_n_per_m: r.fitted_std_error_n_per_m.unwrap_or(f64::NAN),
+            adoptions: r.adoptions,
+            provisional: w.controller.contact.provisional != 0,
+            rate_feedforward: r.rate_feedforward,
+            added_damping_n_s_per_m: r.added_damping_n_s_per_m,
+            mode: w.controller.mode,
+        }
+    }
+}
+
+#[cfg(test)]
+mod contact_tests {
+    use super::*;
+    use crate::config::SimConfig;
+    use crate::msg::WorldSnapshot;
+    use crate::sim::Lockstep;
+
+    /// The `/contact` record carries what the servo's state says: after a touch on 1 MN/m the
+    /// adopted stiffness, the fit, no longer provisional; during the approach the assumption.
+    #[test]
+    fn the_contact_record_is_the_servos_state() {
+        let mut cfg = SimConfig::default();
+        cfg.plant.contact.interaction_stiffness_n_per_m = 1e6;
+        cfg.start_gap_m = 0.2e-3;
+        let mut sim = Lockstep::new(&cfg).unwrap();
+        let at = |sim: &Lockstep| {
+            let w = WorldSnapshot {
+                seq: 9,
+                controller: sim.servo().state(),
+                ..Default::default()
+            };
+            ContactLive::of_snapshot(&w, 5)
+        };
+        let l = at(&sim);
+        assert!(l.provisional && l.mode == 5, "{l:?}");
+        assert_eq!(l.stiffness_in_use_n_per_m, 1e6);
+        assert!(l.fitted_n_per_m.is_nan() && l.adoptions == 0);
+        sim.run(30_000);
+        let l = at(&sim);
+        assert!(!l.provisional && l.mode == 0 && l.adoptions == 1, "{l:?}");
+        assert!(
+            (l.stiffness_in_use_n_per_m / 1e6 - 0.9).abs() < 0.1,
+            "{l:?}"
+        );
+        assert!(l.fitted_n_per_m > 5e5 && l.fitted_std_error_n_per_m > 0.0);
+        assert_eq!((l.seq, l.publish_ns), (9, 5));
+        let json = serde_json::to_value(at(&Lockstep::new(&cfg).unwrap())).unwrap();
+        assert!(json["fitted_n_per_m"].is_null());
+    }
+}
