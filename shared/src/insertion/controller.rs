@@ -408,6 +408,14 @@ impl Controller {
             _ => p.insertion_force_n,
         };
         rate[1] = -tau * p.force_bandwidth_hz / self.wrist[1] * (force - pin.force[1]);
+        if self.phase == Phase::Insert && pin.force[1] < 0.5 * force {
+            // The loop moves a peg that nothing resists at ω F/k: 78 mm/s on the default
+            // 2 kN/m wrist (the speed limit applies), 1.6 mm/s on a 100 kN/m one, too slow
+            // to reach the depth in time. Below half the insertion force the pose goes down
+            // at least at the speed limit, as it does on a compliant wrist (docs/insertion.md,
+            // *The wrist's stiffness*).
+            rate[1] = rate[1].min(-p.max_speed_m_per_s);
+        }
         if inp.force[0].hypot(inp.force[1]) < p.contact_lost_n {
             self.lost_s += dt;
         } else {
