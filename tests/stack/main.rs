@@ -447,6 +447,50 @@ fn killed_boards_are_restarted_and_the_world_resumes() {
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
 }
 
+/// A stack whose tool starts 0.5 mm off a 100 kN/m surface: the servo approaches, touches,
+/// learns the contact (its gains were the approach's assumption, docs/contact.md *First
+/// touch*) and tracks, in agreement with its lockstep reference, with no tick without contact
+/// after the touch and nothing of the prefix left.
+#[test]
+fn a_stack_started_off_a_stiff_surface_touches_learns_and_tracks() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let p = prefix("touch");
+    let _clean = CleanPrefix(p.clone());
+    let dir = std::env::temp_dir().join(format!("afs-touch-{p}"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let stack = dir.join("stack.toml");
+    let base = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/examples/stack.toml"))
+        .unwrap();
+    std::fs::write(
+        &stack,
+        format!(
+            "{base}\n[sim]\nstart_gap_m = 0.0005\n[sim.plant.contact]\ninteraction_stiffness_n_per_m = 1e5\n"
+        ),
+    )
+    .unwrap();
+    let run = start_run(
+        &p,
+        &["--config", stack.to_str().unwrap(), "--duration", "6"],
+    );
+    let r = finish_passed(run.take(), "afs run");
+    assert!(check(&r, "lockstep_agreement").pass, "{:#?}", r.agreement);
+    assert!(check(&r, "ticks_without_contact").pass);
+    let c = r.contact.expect("the servo's contact report");
+    assert_eq!(c.adoptions, 1, "{c:?}");
+    assert!(
+        (c.stiffness_in_use_n_per_m / 1e5 - 1.0).abs() < 0.3,
+        "{c:?}"
+    );
+    // It moved on after the touch (the scenario's velocity, held while approaching).
+    assert!(
+        r.stack.tracking.travelled_m > 1e-3,
+        "{:?}",
+        r.stack.tracking
+    );
+    assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// `afs run --rate-hz 1000` runs the servo at 1 kHz, as `afs experiment --rate-hz 1000` runs its
 /// lockstep: one flag, one meaning. 2 s, every tick joined, in agreement with the lockstep.
 #[test]
