@@ -179,18 +179,14 @@ fn a_users_arm_tracks_the_sinusoid_and_the_flat_surface() {
     );
     let p = prefix("mjuser");
     let _clean = CleanPrefix(p.clone());
-    let stack = dir.join("stack.toml");
     // examples/stack.toml with the user's model as the world.
-    let base = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/examples/stack.toml"))
-        .unwrap();
-    std::fs::write(
-        &stack,
-        format!(
-            "{base}\n[sim.world]\nkind = \"mujoco\"\nmjcf = {:?}\n",
+    let stack = stack_file(
+        &dir,
+        &format!(
+            "[sim.world]\nkind = \"mujoco\"\nmjcf = {:?}\n",
             model.display().to_string()
         ),
-    )
-    .unwrap();
+    );
     let run = start_run(
         &p,
         &["--config", stack.to_str().unwrap(), "--duration", "5"],

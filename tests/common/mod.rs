@@ -121,6 +121,16 @@ pub fn assert_refused(out: &Output, what: &dyn std::fmt::Debug, needle: &str) {
     assert!(!err.contains("panicked"), "{what:?}: {err}");
 }
 
+/// examples/stack.toml with `extra` (TOML) appended, written to `dir/stack.toml`: the full
+/// process graph on a set-up of a test's own.
+pub fn stack_file(dir: &std::path::Path, extra: &str) -> PathBuf {
+    let base = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/examples/stack.toml"))
+        .unwrap();
+    let path = dir.join("stack.toml");
+    std::fs::write(&path, format!("{base}\n{extra}")).unwrap();
+    path
+}
+
 /// `afs run --json --quiet --prefix <prefix> <args>` started in the background, its output
 /// piped, killed if the test fails before it ends.
 pub fn start_run(prefix: &str, args: &[&str]) -> KillOnDrop {

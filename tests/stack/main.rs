@@ -458,16 +458,10 @@ fn a_stack_started_off_a_stiff_surface_touches_learns_and_tracks() {
     let _clean = CleanPrefix(p.clone());
     let dir = std::env::temp_dir().join(format!("afs-touch-{p}"));
     std::fs::create_dir_all(&dir).unwrap();
-    let stack = dir.join("stack.toml");
-    let base = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/examples/stack.toml"))
-        .unwrap();
-    std::fs::write(
-        &stack,
-        format!(
-            "{base}\n[sim]\nstart_gap_m = 0.0005\n[sim.plant.contact]\ninteraction_stiffness_n_per_m = 1e5\n"
-        ),
-    )
-    .unwrap();
+    let stack = stack_file(
+        &dir,
+        "[sim]\nstart_gap_m = 0.0005\n[sim.plant.contact]\ninteraction_stiffness_n_per_m = 1e5\n",
+    );
     let run = start_run(
         &p,
         &["--config", stack.to_str().unwrap(), "--duration", "6"],
