@@ -40,7 +40,9 @@ pub struct DitherParams {
     pub frequency_hz: f64,
     /// Absolute amplitude limit (m).
     pub max_amplitude_m: f64,
-    /// Assumed worst error of the estimated tangent (deg) for the contact-loss bound.
+    /// Assumed worst error of the estimated tangent (deg) for the contact-loss bound: 2°, above
+    /// the 0.75° at which the tracker's drift trigger re-estimates (docs/contact.md, *The
+    /// contact mode and the dither*).
     pub tangent_uncertainty_deg: f64,
     /// Fraction of the preload penetration a stroke may use along the normal (0–1).
     pub contact_margin: f64,
@@ -51,7 +53,7 @@ impl Default for DitherParams {
         Self {
             frequency_hz: 10.0,
             max_amplitude_m: 3e-3,
-            tangent_uncertainty_deg: 3.0,
+            tangent_uncertainty_deg: 2.0,
             contact_margin: 0.8,
         }
     }

@@ -143,6 +143,42 @@ fn the_added_damping_gives_the_contact_mode_its_ratio() {
     assert_eq!(sim.servo().normal_damping(), 0.0);
 }
 
+/// The damping ratio that keeps the contact mode from amplifying the dither: at it the mode's
+/// gain at the dither's frequency, `1/√((1 − r²)² + (2ζr)²)`, is exactly 1 where r < √2, and
+/// none is needed above (the default 10 kN/m contact, whose mode is at 4 Hz against the 10-Hz
+/// dither); 0.57 on 100 kN/m, 0.69 on 1 MN/m (default arm: m = 17.7 kg, k_s = 1 524 N/m).
+#[test]
+fn the_contact_mode_is_damped_so_that_it_does_not_amplify_the_dither() {
+    use crate::servo::dither_damping_ratio;
+    let (w, ks, m) = (std::f64::consts::TAU * 10.0, 1524.0, 17.7);
+    for ke in [5e4, 1e5, 1e6, 1e7] {
+        let zeta = dither_damping_ratio(w, ke, ks, m);
+        let r = w / ((ke + ks) / m).sqrt();
+        let gain = 1.0 / ((1.0 - r * r).powi(2) + (2.0 * zeta * r).powi(2)).sqrt();
+        assert!(
+            r < 2f64.sqrt() && (gain - 1.0).abs() < 1e-12,
+            "k_e {ke:e}: ζ {zeta}, gain {gain}"
+        );
+    }
+    assert!((dither_damping_ratio(w, 1e5, ks, m) - 0.57).abs() < 0.01);
+    assert!((dither_damping_ratio(w, 1e6, ks, m) - 0.69).abs() < 0.01);
+    assert_eq!(dither_damping_ratio(w, 1e4, ks, m), 0.0);
+    assert_eq!(dither_damping_ratio(w, 1e3, ks, m), 0.0);
+    assert_eq!(dither_damping_ratio(f64::NAN, 1e5, ks, m), 0.0);
+    // A servo adopting 100 kN/m damps its mode to that ratio, not to the configured 0.25.
+    let mut cfg = SimConfig::default();
+    cfg.plant.contact.interaction_stiffness_n_per_m = 1e5;
+    let mut sim = Lockstep::new(&cfg).unwrap();
+    sim.servo_mut().adopt_stiffness(1e5);
+    let [mass, cs, k_servo] = sim.servo().contact_mode();
+    let zeta = (cs + sim.servo().normal_damping()) / (2.0 * ((1e5 + k_servo) * mass).sqrt());
+    let want = dither_damping_ratio(w, 1e5, k_servo, mass);
+    assert!(
+        (zeta - want).abs() < 1e-9 && want > 0.5,
+        "ζ {zeta}, want {want}"
+    );
+}
+
 /// Sliding and dithering on steel (1 MN/m): friction's reversals at the dither's frequency
 /// shake the contact mode (37 Hz, ζ = 0.03 undamped). Without the added damping the tool
 /// leaves the surface; with the default ζ_c = 0.25 it stays pressed.

@@ -190,7 +190,7 @@ impl ServoCore {
         self.hybrid
             .set_stiffness_estimate(stiffness, servo_stiffness, self.loop_delay);
         self.normal_damping = contact_damping(
-            self.params.contact_damping_ratio,
+            Self::contact_damping_ratio_for(&self.params, stiffness, servo_stiffness, mass),
             stiffness,
             servo_stiffness,
             mass,

@@ -183,7 +183,53 @@ pub fn contact_damping(
     }
 }
 
+/// The damping ratio the contact's normal mode needs so that it does not amplify the dither:
+/// the mode (natural frequency ω_c = √((k̂_e + k_s)/m)) driven at the dither's ω_d has the gain
+/// `1/√((1 − r²)² + (2ζr)²)`, r = ω_d/ω_c, and that is at most 1 when
+/// `ζ ≥ √(1 − (1 − r²)²) / (2r)`; above r = √2 no damping is needed (docs/contact.md, *The
+/// contact mode and the dither*). 0 when the inputs are not finite and positive.
+pub fn dither_damping_ratio(
+    dither_omega: f64,
+    stiffness: f64,
+    servo_stiffness: f64,
+    mass: f64,
+) -> f64 {
+    let omega_c = ((stiffness + servo_stiffness) / mass).sqrt();
+    let r = dither_omega / omega_c;
+    if !(r.is_finite() && r > 0.0) {
+        return 0.0;
+    }
+    let detune = (1.0 - r * r).powi(2);
+    if detune >= 1.0 {
+        0.0
+    } else {
+        (1.0 - detune).sqrt() / (2.0 * r)
+    }
+}
+
 impl ServoCore {
+    /// The contact mode's damping ratio for a contact of `stiffness` (N/m): the configured
+    /// ζ_c, raised to what keeps the mode from amplifying the dither ([`dither_damping_ratio`]);
+    /// 0 (no damping added) when ζ_c is 0.
+    fn contact_damping_ratio_for(
+        params: &ServoParams,
+        stiffness: f64,
+        servo_stiffness: f64,
+        mass: f64,
+    ) -> f64 {
+        let zeta = params.contact_damping_ratio;
+        if zeta > 0.0 {
+            zeta.max(dither_damping_ratio(
+                params.dither.omega(),
+                stiffness,
+                servo_stiffness,
+                mass,
+            ))
+        } else {
+            0.0
+        }
+    }
+
     /// A servo holding the arm at `q0` in contact, with the measured sensor-frame wrench
     /// `wrench0` and an estimated tangent `tangent_angle` (rad, world).
     pub fn new(
@@ -223,7 +269,12 @@ impl ServoCore {
         let kd_inv = Matrix2::new(1.0 / gains[0].kd, 0.0, 0.0, 1.0 / gains[1].kd);
         let normal_servo_damping = along(&arm, q0, kd_inv, frame.normal());
         let normal_damping = contact_damping(
-            params.contact_damping_ratio,
+            Self::contact_damping_ratio_for(
+                &params,
+                params.hybrid.stiffness_estimate_n_per_m,
+                k_servo,
+                normal_mass,
+            ),
             params.hybrid.stiffness_estimate_n_per_m,
             k_servo,
             normal_mass,
