@@ -80,10 +80,8 @@ impl ServoCore {
         self.stiffness.restore(&c.fit);
         self.stiffness_frame = *self.hybrid.frame();
         self.provisional = c.provisional != 0;
-        if c.adopted > 0 || self.provisional {
-            // The bound follows the adopted stiffness (the dither's own state comes after).
-            self.derive_amplitude_bound();
-        }
+        // The bound follows the stiffness in use (the dither's own state comes after).
+        self.derive_amplitude_bound();
     }
 
     /// Feeds the fit the tool's encoder position (at the measured `pose`) in the task frame and
@@ -180,9 +178,10 @@ impl ServoCore {
         }
     }
 
-    /// Re-derives the gains that depend on the contact's stiffness for `stiffness` (N/m);
-    /// false (nothing changed) unless it is finite and positive.
-    fn use_stiffness(&mut self, stiffness: f64) -> bool {
+    /// Re-derives the gains that depend on the contact's stiffness for `stiffness` (N/m): the
+    /// Hooke's-law stiffness and β, the contact mode's damping, the dither's bound; false
+    /// (nothing changed) unless it is finite and positive.
+    pub(super) fn use_stiffness(&mut self, stiffness: f64) -> bool {
         if !(stiffness.is_finite() && stiffness > 0.0) {
             return false;
         }

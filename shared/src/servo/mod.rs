@@ -268,18 +268,6 @@ impl ServoCore {
         let normal_mass = along(&arm, q0, m_inv, frame.normal());
         let kd_inv = Matrix2::new(1.0 / gains[0].kd, 0.0, 0.0, 1.0 / gains[1].kd);
         let normal_servo_damping = along(&arm, q0, kd_inv, frame.normal());
-        let normal_damping = contact_damping(
-            Self::contact_damping_ratio_for(
-                &params,
-                params.hybrid.stiffness_estimate_n_per_m,
-                k_servo,
-                normal_mass,
-            ),
-            params.hybrid.stiffness_estimate_n_per_m,
-            k_servo,
-            normal_mass,
-            normal_servo_damping,
-        );
         let signal_delay = params
             .hybrid
             .force_signal_delay_s
@@ -351,7 +339,8 @@ impl ServoCore {
             last_stroke: SetpointOffset::default(),
             contact_lost_ticks: 0,
             confirm_corner: false,
-            normal_damping,
+            // Derived below with the other contact-dependent gains.
+            normal_damping: 0.0,
             contact_mode: [normal_mass, normal_servo_damping, k_servo],
             loop_delay,
             stiffness: crate::contact::StiffnessEstimator::new(Default::default()),
@@ -363,6 +352,8 @@ impl ServoCore {
         };
         if mode == ServoMode::Approach {
             servo.assume_stiffest_contact();
+        } else {
+            servo.use_stiffness(params.hybrid.stiffness_estimate_n_per_m);
         }
         Ok(servo)
     }
