@@ -201,7 +201,7 @@ fn a_users_arm_tracks_the_sinusoid_and_the_flat_surface() {
 /// The first touch on MuJoCo (docs/contact.md, *First touch*): from 1 mm off the surface the
 /// servo's guarded approach touches a lighter user's arm with MuJoCo's default contact
 /// (examples/mujoco/user-arm-default-contact.xml, whose contact the fit reads as about
-/// 1.4e5 N/m) and the generated model's 1 MN/m contact, peaking under twice the preload, with no
+/// 1.8e5 N/m) and the generated model's 1 MN/m contact, peaking under twice the preload, with no
 /// bounce and the preload settled.
 #[test]
 fn the_first_touch_holds_on_mujocos_default_contact() {
