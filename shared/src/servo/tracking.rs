@@ -273,7 +273,13 @@ impl ServoCore {
         self.contact_lost_ticks = 0;
         self.counters.contact_losses += 1;
         self.abandon_probe();
-        self.track.odometer_m = (t.min_travel_m - t.contact_lost_travel_m).min(0.0);
+        // The curvature feedforward turns the tangent by κ·odometer from its base: moving the
+        // odometer back must not turn it back, so the base moves with it.
+        let rearm_at = (t.min_travel_m - t.contact_lost_travel_m).min(0.0);
+        self.track.curve_base_rad += self.track.curvature_per_m
+            * (self.track.odometer_m - rearm_at)
+            * self.track.resume_velocity_m_per_s.signum();
+        self.track.odometer_m = rearm_at;
         self.track.drift_rad = 0.0;
         self.force_armed = false;
         self.mode = ServoMode::Track;
@@ -347,5 +353,40 @@ impl ServoCore {
         {
             self.begin_estimation(Trigger::Travel);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::SimConfig;
+    use crate::sim::Lockstep;
+
+    /// The contact guard moves the odometer back so that the triggers re-arm only past the
+    /// edge; the curvature feedforward, which turns the tangent by κ·odometer from its base,
+    /// must not turn with it: tracking goes on along the tangent it had. (Before the fix the
+    /// tangent jumped back by κ times the travel since the last estimate: −13° on fig5.6's
+    /// sinusoid at 100 kN/m.)
+    #[test]
+    fn an_abandoned_probe_run_keeps_the_tangent_fed_forward() {
+        let mut cfg = SimConfig::default();
+        cfg.servo.tracking.enabled = true;
+        let mut sim = Lockstep::new(&cfg).unwrap();
+        let s = sim.servo_mut();
+        s.track.curvature_per_m = 8.0;
+        s.track.curve_base_rad = 0.1;
+        s.track.odometer_m = 0.02;
+        s.track.resume_velocity_m_per_s = 0.005;
+        s.mode = ServoMode::Probing;
+        let fed = |t: &TrackState| t.curve_base_rad + t.curvature_per_m * t.odometer_m;
+        let before = fed(&s.track);
+        for _ in 0..1000 {
+            s.guard_contact(1e-4, 0.0);
+        }
+        assert_eq!(s.mode, ServoMode::Track);
+        assert_eq!(s.counters.contact_losses, 1);
+        assert!(s.track.odometer_m < 0.0);
+        let after = fed(&s.track);
+        assert!((after - before).abs() < 1e-12, "{before} → {after}");
     }
 }
