@@ -179,6 +179,60 @@ fn the_contact_mode_is_damped_so_that_it_does_not_amplify_the_dither() {
     );
 }
 
+/// The force loop stays on during the probes where the contact's mode sits above ω_d/√2:
+/// k_e > m ω_d²/2 − k_s, 33 kN/m on the default arm. Not on the default 10 kN/m contact
+/// (nothing changes there), on 100 kN/m and 1 MN/m.
+#[test]
+fn the_force_loop_stays_on_during_the_probes_of_a_stiff_contact() {
+    use crate::servo::contact_mode_above_dither;
+    let (w, ks, m) = (std::f64::consts::TAU * 10.0, 1524.0, 17.7);
+    let edge = m * w * w / 2.0 - ks;
+    assert!((edge - 33.4e3).abs() < 100.0, "{edge}");
+    assert!(!contact_mode_above_dither(w, edge * 0.99, ks, m));
+    assert!(contact_mode_above_dither(w, edge * 1.01, ks, m));
+    for (ke, on) in [(1e3, false), (1e4, false), (1e5, true), (1e6, true)] {
+        assert_eq!(contact_mode_above_dither(w, ke, ks, m), on, "{ke:e}");
+    }
+    assert!(!contact_mode_above_dither(f64::NAN, 1e5, ks, m));
+    assert!(!contact_mode_above_dither(w, -1e5, ks, m));
+}
+
+/// fig5.6 on 100 kN/m (seed 1): with the force loop frozen during the strokes, as in the
+/// thesis, the dither's normal error along a tangent 1° off swings the force through zero and
+/// the contact guard abandons the probe runs; kept on (`auto`), every check passes.
+#[test]
+fn probes_on_a_stiff_contact_hold_the_preload() {
+    use crate::servo::ProbeForceLoop;
+    let run = |mode| {
+        let mut base = SimConfig::default();
+        base.plant.contact.interaction_stiffness_n_per_m = 1e5;
+        base.servo.probe_force_loop = mode;
+        let opts = crate::experiments::Options {
+            seed: 1,
+            base,
+            ..Default::default()
+        };
+        crate::experiments::fig5_6(&opts).unwrap()
+    };
+    let auto = run(ProbeForceLoop::Auto);
+    let r = &auto.summary.run;
+    assert!(
+        auto.passed() && r.estimations.contact_losses == 0,
+        "auto: {:.2}°, deviation {:.3}, {} ticks off, {} losses",
+        r.tangent_error_rms_deg,
+        r.worst_normal_deviation,
+        r.ticks_without_contact,
+        r.estimations.contact_losses
+    );
+    let frozen = run(ProbeForceLoop::Frozen);
+    let r = &frozen.summary.run;
+    assert!(
+        !frozen.passed() && r.estimations.contact_losses > 0,
+        "frozen: {} losses",
+        r.estimations.contact_losses
+    );
+}
+
 /// Sliding and dithering on steel (1 MN/m): friction's reversals at the dither's frequency
 /// shake the contact mode (37 Hz, ζ = 0.03 undamped). Without the added damping the tool
 /// leaves the surface; with the default ζ_c = 0.25 it stays pressed.

@@ -3,7 +3,7 @@
 //! feedforward β, the contact mode's damping, the dither's amplitude bound) re-derived when the
 //! fit is tight and far from the stiffness in use (docs/contact.md, *Knowing the contact*).
 
-use super::{ServoCore, ServoMode, contact_damping};
+use super::{ServoCore, ServoMode};
 use crate::arm::Pose;
 use crate::contact::{StiffnessEstimate, StiffnessFitState};
 use iceoryx2_bb_derive_macros::ZeroCopySend;
@@ -247,4 +247,64 @@ impl ContactReport {
             added_damping_n_s_per_m: state.contact.normal_damping_n_s_per_m,
         }
     }
+}
+
+/// Damping to add along the normal (N·s/m) so that the contact mode, the effective mass
+/// `mass` (kg) on the contact `stiffness` (N/m) in parallel with the servo's `servo_stiffness`,
+/// has the damping ratio `zeta` with the servo's own `servo_damping` (N·s/m):
+/// `max(0, 2ζ √((k̂_e + k_s) m) − c_s)` (docs/contact.md).
+pub fn contact_damping(
+    zeta: f64,
+    stiffness: f64,
+    servo_stiffness: f64,
+    mass: f64,
+    servo_damping: f64,
+) -> f64 {
+    let want = 2.0 * zeta * ((stiffness + servo_stiffness) * mass).sqrt();
+    if want.is_finite() {
+        (want - servo_damping).max(0.0)
+    } else {
+        0.0
+    }
+}
+
+/// The damping ratio the contact's normal mode needs so that it does not amplify the dither:
+/// the mode (natural frequency ω_c = √((k̂_e + k_s)/m)) driven at the dither's ω_d has the gain
+/// `1/√((1 − r²)² + (2ζr)²)`, r = ω_d/ω_c, and that is at most 1 when
+/// `ζ ≥ √(1 − (1 − r²)²) / (2r)`; above r = √2 no damping is needed (docs/contact.md, *The
+/// contact mode and the dither*). 0 when the inputs are not finite and positive.
+pub fn dither_damping_ratio(
+    dither_omega: f64,
+    stiffness: f64,
+    servo_stiffness: f64,
+    mass: f64,
+) -> f64 {
+    let omega_c = ((stiffness + servo_stiffness) / mass).sqrt();
+    let r = dither_omega / omega_c;
+    if !(r.is_finite() && r > 0.0) {
+        return 0.0;
+    }
+    let detune = (1.0 - r * r).powi(2);
+    if detune >= 1.0 {
+        0.0
+    } else {
+        (1.0 - detune).sqrt() / (2.0 * r)
+    }
+}
+
+/// True when the contact's normal mode (ω_c = √((k̂_e + k_s)/m)) sits above ω_d/√2, the
+/// ratio r = ω_d/ω_c below √2 at which the mode amplifies what drives it at the dither's
+/// frequency ([`dither_damping_ratio`] is then above 0). With the force loop frozen, the
+/// dither's normal error along a tangent that is off then reaches the force at the contact's
+/// stiffness or more (docs/contact.md, *The force loop during the probes*). False when the
+/// inputs are not finite and positive.
+pub fn contact_mode_above_dither(
+    dither_omega: f64,
+    stiffness: f64,
+    servo_stiffness: f64,
+    mass: f64,
+) -> bool {
+    let omega_c = ((stiffness + servo_stiffness) / mass).sqrt();
+    let r = dither_omega / omega_c;
+    r.is_finite() && r > 0.0 && r < std::f64::consts::SQRT_2
 }

@@ -20,8 +20,10 @@ mod safe;
 mod state;
 mod tracking;
 
-pub use contact::{ContactReport, ContactState};
-pub use params::{ApproachParams, SafeParams, ServoParams, TrackingParams};
+pub use contact::{
+    ContactReport, ContactState, contact_damping, contact_mode_above_dither, dither_damping_ratio,
+};
+pub use params::{ApproachParams, ProbeForceLoop, SafeParams, ServoParams, TrackingParams};
 pub use safe::SafeState;
 pub use state::{ServoState, ServoStateFlags, TareState};
 pub use tracking::{EstimationCounters, ProbeRequest, ServoMode, TrackState, Trigger};
@@ -164,50 +166,25 @@ fn along(arm: &Arm, q: Vector2<f64>, inverse: Matrix2<f64>, n: Vec2) -> f64 {
     1.0 / n.dot(&(j * inverse * j.transpose() * n))
 }
 
-/// Damping to add along the normal (N·s/m) so that the contact mode, the effective mass
-/// `mass` (kg) on the contact `stiffness` (N/m) in parallel with the servo's `servo_stiffness`,
-/// has the damping ratio `zeta` with the servo's own `servo_damping` (N·s/m):
-/// `max(0, 2ζ √((k̂_e + k_s) m) − c_s)` (docs/contact.md).
-pub fn contact_damping(
-    zeta: f64,
-    stiffness: f64,
-    servo_stiffness: f64,
-    mass: f64,
-    servo_damping: f64,
-) -> f64 {
-    let want = 2.0 * zeta * ((stiffness + servo_stiffness) * mass).sqrt();
-    if want.is_finite() {
-        (want - servo_damping).max(0.0)
-    } else {
-        0.0
-    }
-}
-
-/// The damping ratio the contact's normal mode needs so that it does not amplify the dither:
-/// the mode (natural frequency ω_c = √((k̂_e + k_s)/m)) driven at the dither's ω_d has the gain
-/// `1/√((1 − r²)² + (2ζr)²)`, r = ω_d/ω_c, and that is at most 1 when
-/// `ζ ≥ √(1 − (1 − r²)²) / (2r)`; above r = √2 no damping is needed (docs/contact.md, *The
-/// contact mode and the dither*). 0 when the inputs are not finite and positive.
-pub fn dither_damping_ratio(
-    dither_omega: f64,
-    stiffness: f64,
-    servo_stiffness: f64,
-    mass: f64,
-) -> f64 {
-    let omega_c = ((stiffness + servo_stiffness) / mass).sqrt();
-    let r = dither_omega / omega_c;
-    if !(r.is_finite() && r > 0.0) {
-        return 0.0;
-    }
-    let detune = (1.0 - r * r).powi(2);
-    if detune >= 1.0 {
-        0.0
-    } else {
-        (1.0 - detune).sqrt() / (2.0 * r)
-    }
-}
-
 impl ServoCore {
+    /// Whether the force loop stays on during a probe's strokes (`servo.probe_force_loop`),
+    /// for the stiffness in use.
+    fn probes_hold_force(&self) -> bool {
+        match self.params.probe_force_loop {
+            ProbeForceLoop::Frozen => false,
+            ProbeForceLoop::On => true,
+            ProbeForceLoop::Auto => {
+                let [mass, _, servo_stiffness] = self.contact_mode;
+                contact_mode_above_dither(
+                    self.params.dither.omega(),
+                    self.hybrid.params().stiffness_estimate_n_per_m,
+                    servo_stiffness,
+                    mass,
+                )
+            }
+        }
+    }
+
     /// The contact mode's damping ratio for a contact of `stiffness` (N/m): the configured
     /// ζ_c, raised to what keeps the mode from amplifying the dither ([`dither_damping_ratio`]);
     /// 0 (no damping added) when ζ_c is 0.
@@ -523,7 +500,7 @@ impl ServoCore {
             _ => {}
         }
         let probing = self.mode == ServoMode::Probing;
-        let force_loop = valid && self.force_control && !probing;
+        let force_loop = valid && self.force_control && (!probing || self.probes_hold_force());
         self.hybrid
             .set_rate_limit(if self.mode == ServoMode::Approach {
                 self.approach_speed

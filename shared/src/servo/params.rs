@@ -10,6 +10,19 @@ use crate::tangent::TangentParams;
 use crate::tuner::TunerConfig;
 use serde::{Deserialize, Serialize};
 
+/// The force loop during a tangent probe's strokes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ProbeForceLoop {
+    /// Frozen on soft contacts, on where the contact's normal mode is above ω_d/√2.
+    #[default]
+    Auto,
+    /// Frozen: the set-point holds still along the normal, as in the thesis (§5.3.2).
+    Frozen,
+    /// On: the force loop keeps the preload while the strokes run.
+    On,
+}
+
 /// Settings of the servo board.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -50,6 +63,10 @@ pub struct ServoParams {
     /// Adopt the contact stiffness fitted on line when it is tight and more than a factor of 2
     /// from the one in use, and re-derive the gains that depend on it (docs/contact.md).
     pub contact_adaptation: bool,
+    /// The force loop during a probe's strokes (docs/contact.md, *The force loop during the
+    /// probes*): frozen as in the thesis, kept on, or `auto`: kept on where the contact's
+    /// normal mode sits above ω_d/√2 (the mode would amplify the dither's normal error).
+    pub probe_force_loop: ProbeForceLoop,
     /// Tangent-estimation probes (thesis §5.3).
     pub tangent: TangentParams,
     /// When to start a tangent estimation on its own (thesis §5.3.2).
@@ -258,6 +275,7 @@ impl Default for ServoParams {
             preload_feedforward: true,
             contact_damping_ratio: 0.25,
             contact_adaptation: true,
+            probe_force_loop: ProbeForceLoop::Auto,
             tangent: TangentParams::default(),
             tracking: TrackingParams::default(),
             safe: SafeParams::default(),
