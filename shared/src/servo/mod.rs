@@ -23,7 +23,9 @@ mod tracking;
 pub use contact::{
     ContactReport, ContactState, contact_damping, contact_mode_above_dither, dither_damping_ratio,
 };
-pub use params::{ApproachParams, ProbeForceLoop, SafeParams, ServoParams, TrackingParams};
+pub use params::{
+    ApproachParams, DriftSource, ProbeForceLoop, SafeParams, ServoParams, TrackingParams,
+};
 pub use safe::SafeState;
 pub use state::{ServoState, ServoStateFlags, TareState};
 pub use tracking::{EstimationCounters, ProbeRequest, ServoMode, TrackState, Trigger};
@@ -167,22 +169,25 @@ fn along(arm: &Arm, q: Vector2<f64>, inverse: Matrix2<f64>, n: Vec2) -> f64 {
 }
 
 impl ServoCore {
-    /// Whether the force loop stays on during a probe's strokes (`servo.probe_force_loop`),
-    /// for the stiffness in use.
-    fn probes_hold_force(&self) -> bool {
+    /// Whether the force loop stays on during a probe's strokes (`servo.probe_force_loop`).
+    pub(super) fn probes_hold_force(&self) -> bool {
         match self.params.probe_force_loop {
             ProbeForceLoop::Frozen => false,
             ProbeForceLoop::On => true,
-            ProbeForceLoop::Auto => {
-                let [mass, _, servo_stiffness] = self.contact_mode;
-                contact_mode_above_dither(
-                    self.params.dither.omega(),
-                    self.hybrid.params().stiffness_estimate_n_per_m,
-                    servo_stiffness,
-                    mass,
-                )
-            }
+            ProbeForceLoop::Auto => self.contact_is_stiff(),
         }
+    }
+
+    /// True when the contact in use is stiff: its normal mode sits above ω_d/√2
+    /// ([`contact_mode_above_dither`]; docs/contact.md, *The force loop during the probes*).
+    pub(super) fn contact_is_stiff(&self) -> bool {
+        let [mass, _, servo_stiffness] = self.contact_mode;
+        contact_mode_above_dither(
+            self.params.dither.omega(),
+            self.hybrid.params().stiffness_estimate_n_per_m,
+            servo_stiffness,
+            mass,
+        )
     }
 
     /// The contact mode's damping ratio for a contact of `stiffness` (N/m): the configured
@@ -575,7 +580,7 @@ impl ServoCore {
         let friction = -cmd.tangential_force_n * dir * ratio;
         let nominal = self.hybrid.nominal_velocity().abs();
         if valid && !safe {
-            self.check_triggers(dt, normal);
+            self.check_triggers(dt, normal, -(j * inp.qd).dot(&n_hat));
             self.guard_contact(dt, normal);
             if self.observes_contact(normal) {
                 self.observe_contact(dt, &pose, normal);

@@ -187,6 +187,23 @@ impl SafeParams {
     }
 }
 
+/// Where the drift trigger reads the tangent error from (docs/contact.md, *The drift on a
+/// stiff contact*).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DriftSource {
+    /// The tip on a stiff contact (the same criterion as `probe_force_loop`'s), the set-point
+    /// otherwise.
+    #[default]
+    Auto,
+    /// The force loop's normal set-point rate, `ω_f (F_d − F̄_N)/k̂`: it sees the surface through
+    /// the servo's compliance.
+    Setpoint,
+    /// The tip's measured velocity along the estimated normal: it sees the surface through the
+    /// contact's compliance.
+    Tip,
+}
+
 /// Limits on the force feedback that start a tangent estimation (thesis §5.3.2: "a sudden
 /// change in force level ... could signal loss of contact or attempts to push into the
 /// environment"), plus the drift of the force loop's normal set-point per unit of travel,
@@ -207,6 +224,9 @@ pub struct TrackingParams {
     pub slope_trigger_deg: f64,
     /// Travel over which the drift is averaged (m).
     pub slope_window_m: f64,
+    /// What the drift is read from: the set-point's normal rate or the tip's normal velocity
+    /// over the travel, or `auto` (the tip on a stiff contact).
+    pub drift_source: DriftSource,
     /// Travel after an estimate before the drift and travel triggers re-arm (m).
     pub min_travel_m: f64,
     /// Estimate at least every this much travel (m); 0 disables.
@@ -245,6 +265,7 @@ impl Default for TrackingParams {
             force_filter_s: 0.002,
             slope_trigger_deg: 0.75,
             slope_window_m: 0.002,
+            drift_source: DriftSource::Auto,
             min_travel_m: 0.001,
             max_travel_m: 0.0,
             curvature_feedforward: true,

@@ -3,7 +3,7 @@
 //! against the travel, the travel itself), the probe run and the estimator's answer, and the
 //! tracker's memory between estimations ([`TrackState`]).
 
-use super::ServoCore;
+use super::{DriftSource, ServoCore};
 use crate::tangent::{ProbePlan, ProbeSample, TangentOutcome};
 use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
@@ -297,7 +297,10 @@ impl ServoCore {
         self.reprobe = false;
     }
 
-    pub(super) fn check_triggers(&mut self, dt: f64, normal: f64) {
+    /// The odometer, the curvature feedforward, the drift and the triggers, for the normal
+    /// force `normal` (N) and the tip's measured velocity into the surface along the estimated
+    /// normal, `tip_inward` (m/s).
+    pub(super) fn check_triggers(&mut self, dt: f64, normal: f64, tip_inward: f64) {
         let t = self.params.tracking;
         // Odometer, curvature feedforward and the drift the force loop absorbs.
         let v = self.hybrid.nominal_velocity();
@@ -315,9 +318,20 @@ impl ServoCore {
         self.normal_window.push(normal);
         let period_mean = self.normal_window.mean();
         if self.mode == ServoMode::Track && v != 0.0 {
-            // The set-point rate for the dither-period mean force: free of the dither's ripple.
+            // The surface's inward rate per unit of travel: the set-point's rate for the
+            // dither-period mean force (free of the dither's ripple), or the tip's velocity.
             let window_s = t.slope_window_m / v.abs();
-            let instant = (self.hybrid.depth_rate_for(period_mean) / v).atan();
+            let from_tip = match t.drift_source {
+                DriftSource::Tip => true,
+                DriftSource::Setpoint => false,
+                DriftSource::Auto => self.contact_is_stiff(),
+            };
+            let inward = if from_tip {
+                tip_inward
+            } else {
+                self.hybrid.depth_rate_for(period_mean)
+            };
+            let instant = (inward / v).atan();
             self.track.drift_rad +=
                 (dt / window_s.max(dt)).min(1.0) * (instant - self.track.drift_rad);
         }
