@@ -272,6 +272,35 @@ fn the_drift_on_steel_is_read_from_the_tip() {
     );
 }
 
+/// The probes are recorded at 1 kHz at every servo rate: 10 kHz keeps every tenth tick, 1 kHz
+/// and 500 Hz every tick. With every tenth tick at any rate, a 500-Hz servo recorded 50 Hz, and
+/// `tangent` at seed 3 missed the no-friction check (0.26° against 0.1°).
+#[test]
+fn the_probes_are_recorded_at_a_kilohertz_at_every_rate() {
+    use crate::servo::probe_decimation;
+    assert_eq!(probe_decimation(10_000.0), 10);
+    assert_eq!(probe_decimation(1_000.0), 1);
+    assert_eq!(probe_decimation(500.0), 1);
+    assert_eq!(probe_decimation(f64::NAN), 1);
+    let mut base = SimConfig::default();
+    base.servo.rate_hz = 500.0;
+    let opts = crate::experiments::Options {
+        seed: 3,
+        base,
+        ..Default::default()
+    };
+    let out = crate::experiments::tangent(&opts).unwrap();
+    assert!(
+        out.passed(),
+        "{:?}",
+        out.checks
+            .iter()
+            .filter(|c| !c.pass)
+            .map(|c| (c.id.clone(), c.value))
+            .collect::<Vec<_>>()
+    );
+}
+
 /// Sliding and dithering on steel (1 MN/m): friction's reversals at the dither's frequency
 /// shake the contact mode (37 Hz, ζ = 0.03 undamped). Without the added damping the tool
 /// leaves the surface; with the default ζ_c = 0.25 it stays pressed.

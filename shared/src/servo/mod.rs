@@ -151,8 +151,20 @@ pub struct ServoCore {
     provisional: bool,
 }
 
-/// Probe samples are recorded every this many servo ticks (1 kHz at 10 kHz).
-pub const PROBE_DECIMATION: usize = 10;
+/// The rate probe samples are recorded at (Hz), whatever the servo's rate (at most it).
+pub const PROBE_RECORD_HZ: f64 = 1000.0;
+
+/// Probe samples are recorded every this many servo ticks: 10 at 10 kHz, 1 at 1 kHz and at
+/// 500 Hz (a record at [`PROBE_RECORD_HZ`], or every tick below it). A fixed 10 recorded a
+/// 1-kHz servo's probes at 100 Hz, with √10 times the noise on every in-phase amplitude.
+pub fn probe_decimation(rate_hz: f64) -> usize {
+    let n = (rate_hz / PROBE_RECORD_HZ).round();
+    if n.is_finite() && n >= 1.0 {
+        n as usize
+    } else {
+        1
+    }
+}
 
 /// The PID joint servos' Cartesian stiffness along direction `n` at `q`:
 /// `1 / (nᵀ J Kp⁻¹ Jᵀ n)` (N/m).
@@ -280,7 +292,9 @@ impl ServoCore {
             };
         let probe_capacity = [params.tangent.first_plan(), params.tangent.reprobe_plan()]
             .iter()
-            .map(|p| ProbeRunner::samples_needed(p, params.rate_hz, PROBE_DECIMATION))
+            .map(|p| {
+                ProbeRunner::samples_needed(p, params.rate_hz, probe_decimation(params.rate_hz))
+            })
             .max()
             .unwrap_or(0);
         let mut servo = Self {
@@ -299,7 +313,7 @@ impl ServoCore {
             last_q_d: q0,
             diag: ServoDiag::default(),
             mode,
-            probe: ProbeRunner::new(probe_capacity, PROBE_DECIMATION),
+            probe: ProbeRunner::new(probe_capacity, probe_decimation(params.rate_hz)),
             reprobe: false,
             force_armed: true,
             counters: EstimationCounters::default(),
