@@ -179,6 +179,23 @@ fn the_contact_mode_is_damped_so_that_it_does_not_amplify_the_dither() {
     );
 }
 
+/// `fig5.6` at seed 1 on a contact of `stiffness` (N/m), the servo told the default and
+/// adapting, with `set` applied to the set-up.
+fn fig5_6_on(
+    stiffness: f64,
+    set: impl FnOnce(&mut SimConfig),
+) -> crate::experiments::Outcome<crate::experiments::Fig56Summary> {
+    let mut base = SimConfig::default();
+    base.plant.contact.interaction_stiffness_n_per_m = stiffness;
+    set(&mut base);
+    let opts = crate::experiments::Options {
+        seed: 1,
+        base,
+        ..Default::default()
+    };
+    crate::experiments::fig5_6(&opts).unwrap()
+}
+
 /// The force loop stays on during the probes where the contact's mode sits above ω_d/√2:
 /// k_e > m ω_d²/2 − k_s, 33 kN/m on the default arm. Not on the default 10 kN/m contact
 /// (nothing changes there), on 100 kN/m and 1 MN/m.
@@ -203,17 +220,7 @@ fn the_force_loop_stays_on_during_the_probes_of_a_stiff_contact() {
 #[test]
 fn probes_on_a_stiff_contact_hold_the_preload() {
     use crate::servo::ProbeForceLoop;
-    let run = |mode| {
-        let mut base = SimConfig::default();
-        base.plant.contact.interaction_stiffness_n_per_m = 1e5;
-        base.servo.probe_force_loop = mode;
-        let opts = crate::experiments::Options {
-            seed: 1,
-            base,
-            ..Default::default()
-        };
-        crate::experiments::fig5_6(&opts).unwrap()
-    };
+    let run = |mode| fig5_6_on(1e5, |c| c.servo.probe_force_loop = mode);
     let auto = run(ProbeForceLoop::Auto);
     let r = &auto.summary.run;
     assert!(
@@ -240,17 +247,7 @@ fn probes_on_a_stiff_contact_hold_the_preload() {
 #[test]
 fn the_drift_on_steel_is_read_from_the_tip() {
     use crate::servo::DriftSource;
-    let run = |source| {
-        let mut base = SimConfig::default();
-        base.plant.contact.interaction_stiffness_n_per_m = 1e6;
-        base.servo.tracking.drift_source = source;
-        let opts = crate::experiments::Options {
-            seed: 1,
-            base,
-            ..Default::default()
-        };
-        crate::experiments::fig5_6(&opts).unwrap()
-    };
+    let run = |source| fig5_6_on(1e6, |c| c.servo.tracking.drift_source = source);
     let auto = run(DriftSource::Auto);
     let r = &auto.summary.run;
     assert!(

@@ -279,11 +279,9 @@ pub fn dither_damping_ratio(
     servo_stiffness: f64,
     mass: f64,
 ) -> f64 {
-    let omega_c = ((stiffness + servo_stiffness) / mass).sqrt();
-    let r = dither_omega / omega_c;
-    if !(r.is_finite() && r > 0.0) {
+    let Some(r) = dither_over_mode(dither_omega, stiffness, servo_stiffness, mass) else {
         return 0.0;
-    }
+    };
     let detune = (1.0 - r * r).powi(2);
     if detune >= 1.0 {
         0.0
@@ -304,7 +302,18 @@ pub fn contact_mode_above_dither(
     servo_stiffness: f64,
     mass: f64,
 ) -> bool {
-    let omega_c = ((stiffness + servo_stiffness) / mass).sqrt();
-    let r = dither_omega / omega_c;
-    r.is_finite() && r > 0.0 && r < std::f64::consts::SQRT_2
+    dither_over_mode(dither_omega, stiffness, servo_stiffness, mass)
+        .is_some_and(|r| r < std::f64::consts::SQRT_2)
+}
+
+/// r = ω_d/ω_c, the dither's frequency over the contact mode's `√((k̂_e + k_s)/m)`; None unless
+/// finite and positive.
+fn dither_over_mode(
+    dither_omega: f64,
+    stiffness: f64,
+    servo_stiffness: f64,
+    mass: f64,
+) -> Option<f64> {
+    let r = dither_omega / ((stiffness + servo_stiffness) / mass).sqrt();
+    (r.is_finite() && r > 0.0).then_some(r)
 }
