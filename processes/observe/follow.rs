@@ -3,11 +3,11 @@
 //! the stack falls silent with none of its nodes left. `afs view` and `afs record` are built
 //! on it; on a remote host they follow what the link board carries (docs/link.md).
 
-use super::topics::{Rec, live};
+use super::topics::{ContactSource, Rec, live};
 use crate::ipc::{self, Svc};
 use afs_shared::insertion::geometry::PegHoleGeometry;
 use afs_shared::join::Joiner;
-use afs_shared::live::{ContactLive, InsertionLive};
+use afs_shared::live::InsertionLive;
 use afs_shared::msg::{
     self, FrictionReport, LoopStats, PegSample, PlantSample, SensorStats, ServoSample,
     SupervisorPhase, SupervisorStatus, WrenchSample,
@@ -44,10 +44,8 @@ pub struct Follower {
     /// The insertion's stream, opened once the supervisor's status names the `insertion`
     /// scenario (a stack of another scenario does not have it).
     peg: Option<Subscriber<Svc, PegSample, ()>>,
-    /// The world blackboard, once the supervisor made it, for the `/contact` record, and when
-    /// that was last made.
-    world: Option<iceoryx2::service::port_factory::blackboard::PortFactory<Svc, u64>>,
-    contact_at: Option<Instant>,
+    /// The `/contact` record's source (the world blackboard, once the supervisor made it).
+    contact: ContactSource,
     /// Holds the ports' node (dropped after them).
     _node: Node<Svc>,
     joiner: Joiner,
@@ -95,8 +93,7 @@ impl Follower {
                 .create()
                 .with_context(|| sub("status"))?,
             peg: None,
-            world: None,
-            contact_at: None,
+            contact: ContactSource::default(),
             _node: node,
             joiner: Joiner::default(),
             heard: Instant::now(),
@@ -185,26 +182,10 @@ impl Follower {
         Ok(None)
     }
 
-    /// The `/contact` record, every [`super::topics::CONTACT_EVERY`]: what the
-    /// servo's newest snapshot says of its contact.
+    /// The `/contact` record, when one is due.
     fn contact(&mut self, sink: &mut impl FnMut(Rec)) {
-        if self
-            .contact_at
-            .is_some_and(|t| t.elapsed() < super::topics::CONTACT_EVERY)
-        {
-            return;
-        }
-        self.contact_at = Some(Instant::now());
-        if self.world.is_none() {
-            self.world = ipc::open_world(&self._node);
-        }
-        if let Some(w) = self.world.as_ref()
-            && let Ok(Some(snapshot)) = ipc::newest_world(w)
-        {
-            sink(Rec::Contact(ContactLive::of_snapshot(
-                &snapshot,
-                crate::rt::monotonic_ns(),
-            )));
+        if let Some(c) = self.contact.poll(|| ipc::open_world(&self._node)) {
+            sink(Rec::Contact(c));
         }
     }
 

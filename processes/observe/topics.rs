@@ -2,12 +2,15 @@
 //! topic list with each message's type name ([`TOPICS`]), and each topic's JSON schema from
 //! the message's byte layout. The recording, the live view and the follower share it.
 
+use crate::ipc::{self, Svc};
 use afs_shared::live::{ContactLive, InsertionLive, LiveSample};
 use afs_shared::msg::{
     self, FrictionReport, LoopStats, PlantSample, SensorStats, ServoSample, SupervisorStatus,
     WrenchSample,
 };
+use iceoryx2::service::port_factory::blackboard;
 use serde::Serialize;
+use std::time::Instant;
 
 /// One recorded sample.
 #[derive(Debug, Clone, Copy)]
@@ -36,6 +39,41 @@ pub enum Rec {
 
 /// How often the `/contact` record is made from the servo's newest world snapshot.
 pub const CONTACT_EVERY: std::time::Duration = std::time::Duration::from_millis(100);
+
+/// Where the `/contact` record comes from: the world blackboard the supervisor makes, read
+/// every [`CONTACT_EVERY`]. The recording and the follower share it.
+#[derive(Default)]
+pub struct ContactSource {
+    world: Option<blackboard::PortFactory<Svc, u64>>,
+    at: Option<Instant>,
+}
+
+impl ContactSource {
+    /// A source reading `world` (None: opened later, by [`ContactSource::poll`]'s opener).
+    pub fn new(world: Option<blackboard::PortFactory<Svc, u64>>) -> Self {
+        Self { world, at: None }
+    }
+
+    /// The record, when one is due: the blackboard opened with `open` while it is missing, and
+    /// the servo's newest snapshot read from it. None when not due or nothing is there yet.
+    pub fn poll(
+        &mut self,
+        open: impl FnOnce() -> Option<blackboard::PortFactory<Svc, u64>>,
+    ) -> Option<ContactLive> {
+        if self.at.is_some_and(|t| t.elapsed() < CONTACT_EVERY) {
+            return None;
+        }
+        self.at = Some(Instant::now());
+        if self.world.is_none() {
+            self.world = open();
+        }
+        let snapshot = ipc::newest_world(self.world.as_ref()?).ok()??;
+        Some(ContactLive::of_snapshot(
+            &snapshot,
+            crate::rt::monotonic_ns(),
+        ))
+    }
+}
 
 /// The topics, in channel order: (topic, message type name).
 pub const TOPICS: [(&str, &str); 10] = [

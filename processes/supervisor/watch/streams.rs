@@ -6,11 +6,11 @@ use super::Supervisor;
 use crate::chaos::ServoView;
 use crate::ipc::{self, Svc};
 use crate::observe::record::Recorder;
-use crate::observe::topics::{self, Rec};
+use crate::observe::topics::{self, ContactSource, Rec};
 use crate::observe::view::LiveView;
 use crate::rt;
 use afs_shared::insertion::geometry::PegHoleGeometry;
-use afs_shared::live::{ContactLive, InsertionLive};
+use afs_shared::live::InsertionLive;
 use afs_shared::msg::{
     Board, BoardStartup, FrictionReport, LoopStats, PegSample, PlantSample, ProcessState,
     SensorStats, ServoCommand, ServoSample, SupervisorStatus, WrenchFlags, WrenchSample,
@@ -20,9 +20,7 @@ use anyhow::{Context, Result};
 use iceoryx2::node::Node;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::service::port_factory::blackboard;
 use std::time::Instant;
-use topics::CONTACT_EVERY;
 
 /// The ports the supervisor reads and writes.
 pub struct Ports {
@@ -39,9 +37,8 @@ pub struct Ports {
     pub(super) command: Publisher<Svc, ServoCommand, ()>,
     /// The insertion's samples (`insertion` scenario only).
     pub(super) peg: Option<Subscriber<Svc, PegSample, ()>>,
-    /// The world blackboard, read for the `/contact` record, and when it was last made.
-    pub(super) world: Option<blackboard::PortFactory<Svc, u64>>,
-    pub(super) contact_at: Option<Instant>,
+    /// The `/contact` record's source.
+    pub(super) contact: ContactSource,
 }
 
 impl Ports {
@@ -60,8 +57,7 @@ impl Ports {
         };
         Ok(Self {
             peg,
-            world: ipc::open_world(node),
-            contact_at: None,
+            contact: ContactSource::new(ipc::open_world(node)),
             plant: ipc::plant(node)?
                 .subscriber_builder()
                 .buffer_size(ipc::TICK_BUFFER)
@@ -248,24 +244,13 @@ impl Supervisor {
         }
     }
 
-    /// The `/contact` record, every [`CONTACT_EVERY`], for the recording and the view: what
-    /// the servo's newest snapshot says of its contact.
+    /// The `/contact` record, when one is due and anything records or shows it.
     fn take_contact(&mut self) {
-        let due = self
-            .ports
-            .contact_at
-            .is_none_or(|t| t.elapsed() >= CONTACT_EVERY);
-        if !(due && self.sinks.any()) {
+        if !self.sinks.any() {
             return;
         }
-        self.ports.contact_at = Some(Instant::now());
-        if let Some(w) = self.ports.world.as_ref()
-            && let Ok(Some(snapshot)) = ipc::newest_world(w)
-        {
-            self.sinks.push(Rec::Contact(ContactLive::of_snapshot(
-                &snapshot,
-                rt::monotonic_ns(),
-            )));
+        if let Some(c) = self.ports.contact.poll(|| None) {
+            self.sinks.push(Rec::Contact(c));
         }
     }
 

@@ -558,9 +558,10 @@ impl ServoCore {
         } else {
             Vector2::zeros()
         };
-        // The Jacobian at the measured pose: the preload's feedforward, the contact mode's
-        // damping and the tuner's tangential velocity.
+        // The Jacobian at the measured pose: the preload's feedforward, and the tip's velocity
+        // (the contact mode's damping, the tuner's tangential velocity, the drift trigger).
         let j = self.arm.jacobian_at(&pose);
+        let tip_velocity = j * inp.qd;
         let n_hat = self.hybrid.frame().normal();
         // The preload's feedforward depends on the configuration and the desired force, not on
         // the measurement: it stays on in the safe state (the set-point backs off instead).
@@ -571,7 +572,7 @@ impl ServoCore {
             // Damps the contact mode: the normal velocity's error against the set-point's own
             // (the force loop's rate), not against a probe stroke's, which presses into the
             // surface on purpose (docs/contact.md).
-            let error = (j * inp.qd - cmd.velocity + extra.velocity).dot(&n_hat);
+            let error = (tip_velocity - cmd.velocity + extra.velocity).dot(&n_hat);
             feedforward -= j.transpose() * (n_hat * (self.normal_damping * error));
         }
         let tau = self.pid.torque(q_d, qd_d, inp.q, inp.qd, feedforward, dt);
@@ -583,7 +584,7 @@ impl ServoCore {
         } else {
             1.0
         };
-        let v_tan = (j * inp.qd).dot(&t_hat);
+        let v_tan = tip_velocity.dot(&t_hat);
         let f_ref = self.params.friction_model_reference_n;
         let normal = cmd.normal_force_n;
         let ratio = if normal > 0.2 * f_ref {
@@ -594,7 +595,7 @@ impl ServoCore {
         let friction = -cmd.tangential_force_n * dir * ratio;
         let nominal = self.hybrid.nominal_velocity().abs();
         if valid && !safe {
-            self.check_triggers(dt, normal, -(j * inp.qd).dot(&n_hat));
+            self.check_triggers(dt, normal, -tip_velocity.dot(&n_hat));
             self.guard_contact(dt, normal);
             if self.observes_contact(normal) {
                 self.observe_contact(dt, &pose, normal);
