@@ -17,6 +17,8 @@ mod nominal;
 mod recursive;
 mod suppression;
 mod touch;
+#[cfg(test)]
+mod trace_tests;
 mod tracking;
 mod tuning;
 

@@ -454,13 +454,13 @@ pub struct Fig56Summary {
     pub run: TrackingRun,
 }
 
-/// Tracking an unknown sinusoidal surface (fig. 5.6): amplitude 3 mm, wavelength 120 mm (slopes
-/// ±9°), one wavelength centred on the arm's operating point at 5 mm/s with the
-/// friction-suppression dither at 5 ẋ_o, sensor noise σ = 0.02 N; the controller starts with
-/// the true tangent and re-estimates when a force limit trips.
-pub fn fig5_6(opts: &Options) -> Result<Outcome<Fig56Summary>, ExperimentError> {
-    let (amp, wl, v) = (0.003, 0.12, 0.005);
-    let mut cfg = config(opts, TunerConfig::Fixed);
+/// fig5.6's sinusoid: amplitude (m) and wavelength (m).
+const FIG5_6_AMPLITUDE_M: f64 = 0.003;
+const FIG5_6_WAVELENGTH_M: f64 = 0.12;
+
+/// Puts `cfg` on fig5.6's sinusoid, through the arm's operating point, the tool at its start
+/// (half a wavelength before it); returns where the run ends (m along the surface).
+pub(crate) fn on_fig5_6_sinusoid(cfg: &mut SimConfig) -> f64 {
     let origin = cfg.surface.frame.origin_m;
     cfg.surface = crate::surface::Surface {
         frame: crate::surface::SurfaceFrame {
@@ -468,12 +468,23 @@ pub fn fig5_6(opts: &Options) -> Result<Outcome<Fig56Summary>, ExperimentError> 
             angle_rad: 0.0,
         },
         shape: crate::surface::Shape::Sinusoid {
-            amplitude_m: amp,
-            wavelength_m: wl,
+            amplitude_m: FIG5_6_AMPLITUDE_M,
+            wavelength_m: FIG5_6_WAVELENGTH_M,
         },
     };
-    cfg.start_u_m = -0.5 * wl;
-    let run = run_tracking(&cfg, v, 0.5 * wl, 5.0 * v, 0.0, 400.0)?;
+    cfg.start_u_m = -0.5 * FIG5_6_WAVELENGTH_M;
+    0.5 * FIG5_6_WAVELENGTH_M
+}
+
+/// Tracking an unknown sinusoidal surface (fig. 5.6): amplitude 3 mm, wavelength 120 mm (slopes
+/// ±9°), one wavelength centred on the arm's operating point at 5 mm/s with the
+/// friction-suppression dither at 5 ẋ_o, sensor noise σ = 0.02 N; the controller starts with
+/// the true tangent and re-estimates when a force limit trips.
+pub fn fig5_6(opts: &Options) -> Result<Outcome<Fig56Summary>, ExperimentError> {
+    let (amp, wl, v) = (FIG5_6_AMPLITUDE_M, FIG5_6_WAVELENGTH_M, 0.005);
+    let mut cfg = config(opts, TunerConfig::Fixed);
+    let end = on_fig5_6_sinusoid(&mut cfg);
+    let run = run_tracking(&cfg, v, end, 5.0 * v, 0.0, 400.0)?;
     let checks = vec![
         Check::at_most(
             "tangent_error_rms_deg",
