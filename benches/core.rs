@@ -121,6 +121,7 @@ fn benches(c: &mut Criterion) {
         noise: 0.02,
         friction: 0.0,
         preload: 2.5,
+        travel: 1.0,
     };
     let (rec, base) = (model.record(&plan, 1), model.base);
     c.bench_function("tangent_estimate", |b| {

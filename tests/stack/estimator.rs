@@ -53,6 +53,7 @@ fn the_estimator_board_answers_requests() {
         noise: 0.0,
         friction: 0.0,
         preload: 2.5,
+        travel: 1.0,
     };
     let (base, alpha0) = (model.base, model.alpha0);
     let rec = model.record(&plan, 0);

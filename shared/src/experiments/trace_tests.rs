@@ -9,8 +9,8 @@
 //! `AFS_TRACE_SEED` (1), `AFS_TRACE_FROM`/`AFS_TRACE_TO` the window (s), `AFS_TRACE_EVERY` ticks
 //! between lines (1000), `AFS_TRACE_CORNERS=1` the corners profile instead of the sinusoid,
 //! `AFS_TRACE_PROBE_FORCE_LOOP=frozen|on|auto`, `AFS_TRACE_DRIFT=setpoint|tip|auto`,
-//! `AFS_TRACE_MJCF=FILE` a MuJoCo arm (with
-//! `--features mujoco`).
+//! `AFS_TRACE_U` the dither's tangent uncertainty (deg), `AFS_TRACE_A` the probes' stroke (m),
+//! `AFS_TRACE_MJCF=FILE` a MuJoCo arm (with `--features mujoco`).
 
 use crate::config::SimConfig;
 use crate::msg::{PlantSample, ServoSample};
@@ -43,6 +43,9 @@ fn print_a_tracking_trace() {
         Ok("tip") => DriftSource::Tip,
         _ => DriftSource::Auto,
     };
+    cfg.servo.dither.tangent_uncertainty_deg =
+        setting("AFS_TRACE_U", cfg.servo.dither.tangent_uncertainty_deg);
+    cfg.servo.tangent.amplitude_m = setting("AFS_TRACE_A", cfg.servo.tangent.amplitude_m);
     if let Ok(mjcf) = std::env::var("AFS_TRACE_MJCF") {
         cfg.world.kind = crate::config::WorldKind::Mujoco;
         cfg.world.mjcf = Some(mjcf);

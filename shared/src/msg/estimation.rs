@@ -216,6 +216,8 @@ wire_code! {
         TooNoisy = 12,
         /// The estimate's standard error is beyond the limit.
         Uncertain = 13,
+        /// Friction held the tip during a probe.
+        Stuck = 14,
     }
 }
 
@@ -377,6 +379,10 @@ impl TangentResponse {
                         std_error_deg,
                         limit_deg,
                     } => (ResponseCode::Uncertain, std_error_deg, limit_deg),
+                    TangentError::Stuck {
+                        probe,
+                        travel_fraction,
+                    } => (ResponseCode::Stuck, probe as f64, travel_fraction),
                     TangentError::Unresolved(reason) => (reason.into(), 0.0, 0.0),
                 };
                 r.code = code.into();
@@ -452,6 +458,10 @@ impl TangentResponse {
                     ResponseCode::Uncertain => TangentError::Uncertain {
                         std_error_deg: a,
                         limit_deg: b,
+                    },
+                    ResponseCode::Stuck => TangentError::Stuck {
+                        probe: count(a),
+                        travel_fraction: b,
                     },
                     c => TangentError::Unresolved(c.reason()?),
                 })

@@ -40,6 +40,10 @@ fn tangent_outcomes_round_trip() {
             std_error_deg: 0.7,
             limit_deg: 0.5,
         }),
+        TangentOutcome::Failed(TangentError::Stuck {
+            probe: 1,
+            travel_fraction: 0.01,
+        }),
         TangentOutcome::Failed(TangentError::Unresolved(ReprobeReason::EqualResponses)),
     ];
     for o in outcomes {

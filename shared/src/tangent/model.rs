@@ -6,7 +6,8 @@ use crate::math::{Vec2, perp, unit};
 
 /// A synthetic probe run of the contact model, at 1 kHz: a 200-sample hold at the preload,
 /// then each probe's whole periods. Normal force `preload − k·A·sin(α0 + δα)·sin φ` along the
-/// true normal, friction `μ F_N sgn(ṡ)` along the true tangent, Gaussian noise on both axes.
+/// true normal, friction `μ F_N sgn(ṡ)` along the true tangent, Gaussian noise on both axes; the
+/// recorded tip travels `travel` of the stroke.
 /// For tests and benchmarks of the estimator (and for a client exercising the estimator board).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ProbeModel {
@@ -22,6 +23,9 @@ pub struct ProbeModel {
     pub friction: f64,
     /// Preload (N).
     pub preload: f64,
+    /// Fraction of the stroke the tip travels (1: it follows the command; near 0: friction
+    /// holds it while the servo's spring still loads the contact).
+    pub travel: f64,
 }
 
 impl ProbeModel {
@@ -63,7 +67,7 @@ impl ProbeModel {
                 let fnn = self.preload - self.k * disp * beta.sin();
                 let fric = -self.friction * fnn * vel.signum();
                 let f = n_true * fnn + t_true * (fric * dir.dot(&t_true).signum()) + nz();
-                let tip = dir * disp;
+                let tip = dir * (disp * self.travel);
                 out.push(ProbeSample {
                     t: k as f64 / rate,
                     force: [f.x, f.y],

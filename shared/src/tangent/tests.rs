@@ -11,6 +11,7 @@ fn synth(alpha0_deg: f64) -> ProbeModel {
         noise: 0.02,
         friction: 0.0,
         preload: 2.5,
+        travel: 1.0,
     }
 }
 
@@ -323,4 +324,41 @@ fn rls_tracks_a_slowly_varying_slope() {
         fixed.tangent_angle()
     );
     assert!((fixed.stiffness() - k).abs() < 0.01 * k);
+}
+
+/// A tip that friction holds is an error, not an angle: the force the servo's spring puts on
+/// the contact no longer follows the tip's motion. A tip that travels 0.55 of the stroke (the
+/// least measured on a sliding probe, docs/surface-tracking.md §4) still gives the angle.
+#[test]
+fn a_stuck_tip_is_an_error() {
+    let params = TangentParams::default();
+    let plan = params.first_plan();
+    let stuck = ProbeModel {
+        travel: 0.01,
+        ..synth(2.0)
+    };
+    let out = estimate(&stuck.record(&plan, 7), &plan, stuck.base, &params, false);
+    match out {
+        TangentOutcome::Failed(TangentError::Stuck {
+            probe,
+            travel_fraction,
+        }) => {
+            assert_eq!(probe, 0);
+            assert!((travel_fraction - 0.01).abs() < 0.002, "{travel_fraction}");
+        }
+        other => panic!("{other:?}"),
+    }
+    let sliding = ProbeModel {
+        travel: 0.55,
+        ..synth(2.0)
+    };
+    let (out, _) = run(&sliding, &params);
+    match out {
+        TangentOutcome::Estimate(e) => assert!(
+            (e.alpha0_rad.to_degrees() - 2.0).abs() < 0.1,
+            "{}",
+            e.alpha0_rad.to_degrees()
+        ),
+        other => panic!("{other:?}"),
+    }
 }
