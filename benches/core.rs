@@ -122,6 +122,7 @@ fn benches(c: &mut Criterion) {
         friction: 0.0,
         preload: 2.5,
         travel: 1.0,
+        share: 1.0,
     };
     let (rec, base) = (model.record(&plan, 1), model.base);
     c.bench_function("tangent_estimate", |b| {

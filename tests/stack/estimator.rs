@@ -12,7 +12,7 @@ fn the_estimator_board_answers_requests() {
     use afs_shared::msg::{
         self, Outcome, RotationRequestHeader, RotationSample, TangentRequestHeader,
     };
-    use afs_shared::tangent::{ProbeModel, TangentParams};
+    use afs_shared::tangent::TangentParams;
     use iceoryx2::service::port_factory::PortFactory;
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let p = prefix("es");
@@ -46,15 +46,7 @@ fn the_estimator_board_answers_requests() {
     // A rigid 1 mm stroke against a 1.4 kN/m spring, no noise.
     let params = TangentParams::default();
     let plan = params.first_plan();
-    let model = ProbeModel {
-        alpha0: 3f64.to_radians(),
-        base: 0.3,
-        k: 1400.0,
-        noise: 0.0,
-        friction: 0.0,
-        preload: 2.5,
-        travel: 1.0,
-    };
+    let model = rigid_stroke_model();
     let (base, alpha0) = (model.base, model.alpha0);
     let rec = model.record(&plan, 0);
     let ask = |header: TangentRequestHeader| {
@@ -165,4 +157,18 @@ fn the_estimator_board_answers_requests() {
     // The test's own node was a member of the domain: release it (its node counter goes).
     ipc::release_prefix(&p).unwrap();
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
+}
+
+/// A rigid 1 mm stroke's record model: a 1.4 kN/m spring, no noise, no friction, α0 = 3°.
+fn rigid_stroke_model() -> afs_shared::tangent::ProbeModel {
+    afs_shared::tangent::ProbeModel {
+        alpha0: 3f64.to_radians(),
+        base: 0.3,
+        k: 1400.0,
+        noise: 0.0,
+        friction: 0.0,
+        preload: 2.5,
+        travel: 1.0,
+        share: 1.0,
+    }
 }

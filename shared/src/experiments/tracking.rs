@@ -38,7 +38,7 @@ pub struct TangentTrial {
     pub thesis_6_1_error_deg: Option<f64>,
     /// The signed ratio of the responses to the commanded strokes (exact eq. 5.8): its error (deg).
     pub ratio_error_deg: Option<f64>,
-    /// Rule used ("MotionRegression" or "CommandedRatio").
+    /// Rule used ("MotionRegression", "CommandedRatio" or "TipPath").
     pub method: Option<String>,
     /// Reported standard error (deg).
     pub std_error_deg: Option<f64>,

@@ -230,6 +230,8 @@ wire_code! {
         MotionRegression = 0,
         /// Ratio of the responses to the commanded strokes.
         CommandedRatio = 1,
+        /// The tip's path over the probes.
+        TipPath = 2,
     }
 }
 
@@ -309,6 +311,7 @@ impl From<TangentMethod> for MethodCode {
         match m {
             TangentMethod::MotionRegression => MethodCode::MotionRegression,
             TangentMethod::CommandedRatio => MethodCode::CommandedRatio,
+            TangentMethod::TipPath => MethodCode::TipPath,
         }
     }
 }
@@ -318,6 +321,7 @@ impl From<MethodCode> for TangentMethod {
         match m {
             MethodCode::MotionRegression => TangentMethod::MotionRegression,
             MethodCode::CommandedRatio => TangentMethod::CommandedRatio,
+            MethodCode::TipPath => TangentMethod::TipPath,
         }
     }
 }

@@ -20,6 +20,9 @@ pub enum TangentMethod {
     /// Ratio of the responses to the commanded strokes (exact eq. 5.8, or least squares over
     /// more probes); used when the tip motion is not recorded.
     CommandedRatio,
+    /// The direction of the tip's own path over the probes (see [`tip_path`]), where the force
+    /// response is too small for the regression: a contact much stiffer than the servo.
+    TipPath,
 }
 
 /// Why the estimator wants another probe set.
@@ -152,7 +155,36 @@ pub enum TangentOutcome {
 /// Before answering, the signed responses decide whether the thesis's form would fold (probes
 /// on both sides of the tangent) or be ill-conditioned (R1 ≈ R2): then the estimator asks for
 /// a re-probe on both sides with wider angles.
+///
+/// Where the regression has no answer (a force response in the noise, no significant sign, an
+/// uncertain fit), the tip's own path may have one: on a contact much stiffer than the servo
+/// the tip slides along the surface whatever direction it is stroked in ([`tip_path`]).
 pub fn estimate(
+    samples: &[ProbeSample],
+    plan: &ProbePlan,
+    base_angle: f64,
+    params: &TangentParams,
+    reprobed: bool,
+) -> TangentOutcome {
+    let outcome = regression_estimate(samples, plan, base_angle, params, reprobed);
+    // Only a re-probe set the regression could not resolve: its four probes give the path a
+    // residual to be judged by, and every answer the regression gives stays its own.
+    let unresolved = matches!(
+        outcome,
+        TangentOutcome::Failed(
+            TangentError::TooNoisy { .. }
+                | TangentError::Uncertain { .. }
+                | TangentError::Unresolved(_)
+        )
+    );
+    if !(reprobed && unresolved) {
+        return outcome;
+    }
+    tip_path_outcome(samples, plan, base_angle, params).map_or(outcome, TangentOutcome::Estimate)
+}
+
+/// The motion regression alone (see [`estimate`]).
+pub(super) fn regression_estimate(
     samples: &[ProbeSample],
     plan: &ProbePlan,
     base_angle: f64,

@@ -29,6 +29,7 @@
 mod angle;
 mod estimate;
 mod model;
+mod path;
 mod plan;
 mod rls;
 mod stats;
@@ -38,6 +39,7 @@ mod tests;
 pub use angle::*;
 pub use estimate::*;
 pub use model::*;
+pub use path::*;
 pub use plan::*;
 pub use rls::*;
 pub use stats::*;

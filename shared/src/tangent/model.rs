@@ -7,7 +7,7 @@ use crate::math::{Vec2, perp, unit};
 /// A synthetic probe run of the contact model, at 1 kHz: a 200-sample hold at the preload,
 /// then each probe's whole periods. Normal force `preload − k·A·sin(α0 + δα)·sin φ` along the
 /// true normal, friction `μ F_N sgn(ṡ)` along the true tangent, Gaussian noise on both axes; the
-/// recorded tip travels `travel` of the stroke.
+/// recorded tip travels `travel` of the stroke and follows `share` of its normal part.
 /// For tests and benchmarks of the estimator (and for a client exercising the estimator board).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ProbeModel {
@@ -26,6 +26,10 @@ pub struct ProbeModel {
     /// Fraction of the stroke the tip travels (1: it follows the command; near 0: friction
     /// holds it while the servo's spring still loads the contact).
     pub travel: f64,
+    /// Fraction of the stroke's part along the true normal that the tip follows into the
+    /// contact (1: all of it; near 0: a contact much stiffer than the servo holds the tip on
+    /// the surface, and the force response shrinks with it).
+    pub share: f64,
 }
 
 impl ProbeModel {
@@ -64,10 +68,11 @@ impl ProbeModel {
                 let disp = plan.amplitude_m * phase.sin();
                 let vel = phase.cos();
                 let beta = self.alpha0 + plan.offsets[p];
-                let fnn = self.preload - self.k * disp * beta.sin();
+                let fnn = self.preload - self.k * disp * self.share * beta.sin();
                 let fric = -self.friction * fnn * vel.signum();
                 let f = n_true * fnn + t_true * (fric * dir.dot(&t_true).signum()) + nz();
-                let tip = dir * (disp * self.travel);
+                let tip = (t_true * beta.cos() + n_true * (self.share * beta.sin()))
+                    * (disp * self.travel);
                 out.push(ProbeSample {
                     t: k as f64 / rate,
                     force: [f.x, f.y],

@@ -12,6 +12,7 @@ fn synth(alpha0_deg: f64) -> ProbeModel {
         friction: 0.0,
         preload: 2.5,
         travel: 1.0,
+        share: 1.0,
     }
 }
 
