@@ -220,4 +220,58 @@ mod tests {
         let out = estimate(&soft.record(&second, 4), &second, 0.3, &params, true);
         assert!(matches!(out, TangentOutcome::Failed(_)), "{out:?}");
     }
+
+    /// A tip that moved against every stroke (phase-inverted) has no path: fitted as a line
+    /// it would read the surface half a turn round.
+    #[test]
+    fn a_tip_moving_against_the_strokes_has_no_path() {
+        let offsets = [-16f64, -8.0, 8.0, 16.0].map(f64::to_radians);
+        let mut against = stats_on_the_line(0.02, 0.0, &offsets);
+        for s in &mut against {
+            s.displacement_m = [-s.displacement_m[0], -s.displacement_m[1]];
+        }
+        assert_eq!(tip_path(&against), None);
+    }
+
+    /// The standard error is ordinary least squares' with the delta method for
+    /// α0 = −a/(1 − b), computed here independently with nalgebra's matrices.
+    #[test]
+    fn the_tip_paths_standard_error_is_least_squares_and_the_delta_method() {
+        use nalgebra::{Matrix2, Vector2};
+        // Five probes off centre: every term of the covariance counts.
+        let offsets = [-16f64, -8.0, 4.0, 8.0, 16.0].map(f64::to_radians);
+        let mut stats = stats_on_the_line(0.03, 0.002, &offsets);
+        let scatter = [2e-4, -3e-4, 1.5e-4, -1e-4, 2.5e-4];
+        for (s, e) in stats.iter_mut().zip(scatter) {
+            let psi = s.displacement_m[1].atan2(s.displacement_m[0]) + e;
+            s.displacement_m = [8e-4 * psi.cos(), 8e-4 * psi.sin()];
+        }
+        let path = tip_path(&stats).unwrap();
+        let psi: Vec<f64> = stats
+            .iter()
+            .map(|s| s.displacement_m[1].atan2(s.displacement_m[0]))
+            .collect();
+        let mut xtx = Matrix2::zeros();
+        let mut xty = Vector2::zeros();
+        for (d, p) in offsets.iter().zip(&psi) {
+            let row = Vector2::new(1.0, *d);
+            xtx += row * row.transpose();
+            xty += row * *p;
+        }
+        let inv = xtx.try_inverse().unwrap();
+        let coef = inv * xty;
+        let (a, b) = (coef[0], coef[1]);
+        let sse: f64 = offsets
+            .iter()
+            .zip(&psi)
+            .map(|(d, p)| (p - a - b * d).powi(2))
+            .sum();
+        let cov = inv * (sse / 3.0);
+        let g = Vector2::new(-1.0 / (1.0 - b), -a / (1.0 - b).powi(2));
+        let se = (g.transpose() * cov * g)[0].sqrt();
+        assert!((path.alpha0_rad + a / (1.0 - b)).abs() < 1e-12);
+        assert!((path.slope - b).abs() < 1e-12);
+        let got = path.std_error_rad.unwrap();
+        assert!(se > 1e-5 && (got - se).abs() < 1e-9 * se, "{got} vs {se}");
+    }
 }
