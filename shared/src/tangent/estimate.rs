@@ -255,12 +255,7 @@ pub(super) fn regression_estimate(
             if let Some(stuck) = stuck_probe(&stats[..count], plan.amplitude_m) {
                 return TangentOutcome::Failed(stuck);
             }
-            let (sig, noise) = stats
-                .iter()
-                .take(count)
-                .fold((0.0f64, 0.0f64), |(a, b), s| {
-                    (a.max(s.r_signed_n.abs()), b.max(s.r_std_n))
-                });
+            let (sig, noise) = signal_and_noise(&stats[..count]);
             if sig < 3.0 * noise {
                 return TangentOutcome::Failed(TangentError::TooNoisy {
                     signal_n: sig,
@@ -302,12 +297,7 @@ pub(super) fn regression_estimate(
             limit_deg: params.max_std_error_deg,
         });
     }
-    let (sig, noise) = stats
-        .iter()
-        .take(count)
-        .fold((0.0f64, 0.0f64), |(a, b), s| {
-            (a.max(s.r_signed_n.abs()), b.max(s.r_std_n))
-        });
+    let (sig, noise) = signal_and_noise(&stats[..count]);
     // Cross-checks: the thesis's forms and the commanded-stroke ratio.
     let thesis = eq_5_8(stats[0].rms_n, stats[1].rms_n, offsets[0], offsets[1]);
     let sides = |s: &ProbeStats| 0.5 * (s.stroke_sides_m[0] + s.stroke_sides_m[1]);
@@ -344,6 +334,14 @@ pub(super) fn regression_estimate(
         stiffness_n_per_m: stiffness,
         probes: count,
         iterations,
+    })
+}
+
+/// The largest signed response |R| over the probes and the largest of their standard errors
+/// (N): the signal and the noise the estimator's gates compare.
+pub(super) fn signal_and_noise(stats: &[ProbeStats]) -> (f64, f64) {
+    stats.iter().fold((0.0f64, 0.0f64), |(a, b), s| {
+        (a.max(s.r_signed_n.abs()), b.max(s.r_std_n))
     })
 }
 

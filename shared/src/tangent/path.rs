@@ -109,9 +109,7 @@ pub(super) fn tip_path_outcome(
     if !(se <= params.max_std_error_deg.to_radians() && path.alpha0_rad.is_finite()) {
         return None;
     }
-    let (sig, noise) = stats.iter().fold((0.0f64, 0.0f64), |(a, b), s| {
-        (a.max(s.r_signed_n.abs()), b.max(s.r_std_n))
-    });
+    let (sig, noise) = signal_and_noise(&stats);
     Some(TangentEstimate {
         alpha0_rad: path.alpha0_rad,
         tangent_angle_rad: base_angle - path.alpha0_rad,
