@@ -10,7 +10,7 @@
 //! between lines (1000), `AFS_TRACE_CORNERS=1` the corners profile instead of the sinusoid,
 //! `AFS_TRACE_PROBE_FORCE_LOOP=frozen|on|auto`, `AFS_TRACE_DRIFT=setpoint|tip|auto`,
 //! `AFS_TRACE_U` the dither's tangent uncertainty (deg), `AFS_TRACE_A` the probes' stroke (m),
-//! `AFS_TRACE_RATE` the servo's rate (Hz),
+//! `AFS_TRACE_RATE` the servo's rate (Hz), `AFS_TRACE_TOLD` the stiffness the servo is told (N/m),
 //! `AFS_TRACE_MJCF=FILE` a MuJoCo arm (with `--features mujoco`).
 
 use crate::config::SimConfig;
@@ -48,6 +48,10 @@ fn print_a_tracking_trace() {
         setting("AFS_TRACE_U", cfg.servo.dither.tangent_uncertainty_deg);
     cfg.servo.tangent.amplitude_m = setting("AFS_TRACE_A", cfg.servo.tangent.amplitude_m);
     cfg.servo.rate_hz = setting("AFS_TRACE_RATE", cfg.servo.rate_hz);
+    cfg.servo.hybrid.stiffness_estimate_n_per_m = setting(
+        "AFS_TRACE_TOLD",
+        cfg.servo.hybrid.stiffness_estimate_n_per_m,
+    );
     if let Ok(mjcf) = std::env::var("AFS_TRACE_MJCF") {
         cfg.world.kind = crate::config::WorldKind::Mujoco;
         cfg.world.mjcf = Some(mjcf);
