@@ -59,6 +59,11 @@ fn franka_rs_layout() -> Value {
 /// Runs the check on `layout` at the loopback `address`; None (with the reason printed) when
 /// it skipped.
 fn check(layout: &Value, address: &str, name: &str) -> Option<Value> {
+    run_script(layout, address, name, &[])
+}
+
+/// Runs the check script with `extra` arguments; its JSON report, or None when it skipped.
+fn run_script(layout: &Value, address: &str, name: &str, extra: &[String]) -> Option<Value> {
     let dir = std::env::temp_dir().join(format!("afs-fci-wire-{}-{name}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let file = dir.join("layout.json");
@@ -72,6 +77,7 @@ fn check(layout: &Value, address: &str, name: &str) -> Option<Value> {
         .arg("--layout")
         .arg(&file)
         .args(["--address", address])
+        .args(extra)
         .output()
         .expect("python3 is needed for this test");
     std::fs::remove_dir_all(&dir).unwrap();
@@ -131,4 +137,91 @@ fn a_layout_off_by_one_field_is_caught() {
         "{r:#}"
     );
     assert_eq!(r["agrees"], false);
+}
+
+/// The largest |a − b| over two equal-length slices.
+fn max_difference(a: &[f64], b: &[f64]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+}
+
+fn floats(v: &Value) -> Vec<f64> {
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect()
+}
+
+/// The FR3's model afs will take its torques from, franka-rs's native one built from the URDF
+/// the robot serves, is libfranka's: mass matrix, Coriolis vector, gravity and the end
+/// effector's zero Jacobian, at three states (unloaded, identity tool frames), within 1e-6.
+#[test]
+fn franka_rs_s_fr3_model_is_libfranka_s() {
+    use franka::model::{Frame, Model};
+    let model = Model::from_urdf(franka::model::FR3_URDF).unwrap();
+    let states: [[f64; 14]; 3] = [
+        [
+            0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785, 0.1, 0.2, -0.1, 0.3, 0.2, -0.2, 0.5,
+        ],
+        [
+            0.5, 0.3, -0.4, -1.8, 0.6, 2.2, -0.9, -0.4, 0.7, 0.3, -0.5, 1.1, 0.9, -1.3,
+        ],
+        [
+            -1.2, 1.1, 1.5, -0.6, -2.0, 3.5, 2.1, 1.0, -0.8, 0.6, 0.4, -1.5, 2.0, 0.8,
+        ],
+    ];
+    for (i, state) in states.iter().enumerate() {
+        let args: Vec<String> = std::iter::once("--model-at".to_string())
+            .chain(state.iter().map(|x| x.to_string()))
+            .collect();
+        let Some(r) = run_script(
+            &franka_rs_layout(),
+            "127.0.0.63",
+            &format!("model{i}"),
+            &args,
+        ) else {
+            return;
+        };
+        assert!(r.get("exception").is_none(), "{r:#}");
+        // The state went over the wire as f32: both models take what libfranka read.
+        let q: [f64; 7] = floats(&r["q"]).try_into().unwrap();
+        let dq: [f64; 7] = floats(&r["dq"]).try_into().unwrap();
+        let gravity = [0.0, 0.0, f64::from(-9.81f32)];
+        let identity = [
+            1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0,
+        ];
+        let none = [0.0; 9];
+        let origin = [0.0; 3];
+        let ours = [
+            ("mass", model.mass_q(&q, &none, 0.0, &origin).to_vec()),
+            (
+                "coriolis",
+                model
+                    .coriolis_q(&q, &dq, &none, 0.0, &origin, &gravity)
+                    .to_vec(),
+            ),
+            (
+                "gravity",
+                model.gravity_q(&q, 0.0, &origin, &gravity).to_vec(),
+            ),
+            (
+                "zero_jacobian_ee",
+                model
+                    .zero_jacobian_q(Frame::EndEffector, &q, &identity, &identity)
+                    .to_vec(),
+            ),
+        ];
+        for (name, value) in ours {
+            let theirs = floats(&r[name]);
+            let d = max_difference(&value, &theirs);
+            assert!(
+                d < 1e-6,
+                "state {i}, {name}: differs by {d:e}\nfranka-rs {value:?}\nlibfranka {theirs:?}"
+            );
+        }
+    }
 }

@@ -20,6 +20,9 @@ Exit 0 when every check agrees, 1 when one does not, 2 when pylibfranka is missi
 stub cannot bind (the report says which).
 
 python3 examples/python/fci_wire_check.py --layout LAYOUT.json [--address 127.0.0.N]
+python3 examples/python/fci_wire_check.py --layout LAYOUT.json --model-at Q1 .. Q7 DQ1 .. DQ7
+    (libfranka's model at that state, from the URDF the stub serves: mass, coriolis, gravity and
+    the end effector's zero Jacobian, column-major, as JSON)
 """
 
 import argparse
@@ -46,12 +49,20 @@ def field_values(index, count):
     return [100.0 * index + j + 0.25 for j in range(count)]
 
 
-def build_state(layout, message_id, moving):
+IDENTITY = [1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0]
+
+
+def build_state(layout, message_id, moving, at=None):
+    """The state datagram: distinct values in every field, or, with `at` (q and dq), an arm at
+    rest there with no load and identity tool frames (for the model's check)."""
     buf = bytearray(layout["state_size"])
     for k, f in enumerate(layout["state"]):
         off, n = f["offset"], f["count"]
         if f["kind"] == "f32":
-            struct.pack_into(f"<{n}f", buf, off, *field_values(k, n))
+            values = field_values(k, n)
+            if at is not None:
+                values = at.get(f["name"], IDENTITY if n == 16 else [0.0] * n)
+            struct.pack_into(f"<{n}f", buf, off, *values)
         elif f["kind"] == "u64":
             struct.pack_into("<Q", buf, off, message_id)
     offsets = {f["name"]: f["offset"] for f in layout["state"]}
@@ -71,7 +82,7 @@ def recv_exact(conn, n):
     return data
 
 
-def serve(address, layout, connect_status, out):
+def serve(address, layout, connect_status, out, at=None):
     """The stub robot: one client, its requests and datagrams recorded in `out`."""
     report = {"requests": [], "commands": []}
     try:
@@ -97,7 +108,7 @@ def serve(address, layout, connect_status, out):
         message_id = 1
         while not stop.is_set():
             if "udp" in client:
-                udp.sendto(build_state(layout, message_id, moving.is_set()), client["udp"])
+                udp.sendto(build_state(layout, message_id, moving.is_set(), at), client["udp"])
                 message_id += 1
             time.sleep(0.001)
 
@@ -183,6 +194,43 @@ def run_client(address, out):
     out.put(result)
 
 
+def run_model_client(address, out):
+    """Franka's own model (libfranka's, from the URDF the stub serves) at the stub's state."""
+    import pylibfranka as franka
+
+    try:
+        robot = franka.Robot(address, franka.RealtimeConfig.kIgnore)
+        model = robot.load_model()
+        state = robot.read_once()
+        out.put({"q": list(state.q), "dq": list(state.dq), "mass": list(model.mass(state)),
+                 "coriolis": list(model.coriolis(state)), "gravity": list(model.gravity(state)),
+                 "zero_jacobian_ee": list(model.zero_jacobian(state))})
+        del robot
+    except Exception as e:
+        out.put({"exception": f"{type(e).__name__}: {e}"})
+
+
+def model_at(address, layout, q, dq):
+    """The official model's mass, Coriolis, gravity and Jacobian at (q, dq)."""
+    out = mp.Queue()
+    # O_ddP_O is the gravity vector the robot reports, which libfranka's gravity() takes.
+    at = {"q": q, "dq": dq, "O_ddP_O": [0.0, 0.0, -9.81]}
+    server = mp.Process(target=serve, args=(address, layout, 0, out, at))
+    server.start()
+    ready = out.get(timeout=10)
+    if "error" in ready:
+        server.join()
+        return {"skipped": ready["error"]}
+    client_out = mp.Queue()
+    client = mp.Process(target=run_model_client, args=(address, client_out))
+    client.start()
+    result = client_out.get(timeout=60)
+    client.join()
+    server.terminate()
+    server.join()
+    return result
+
+
 def check_connect_refusal(address):
     """Status 1 in the (u8, u16) layout: the client names the version the reply carries."""
     out = mp.Queue()
@@ -209,6 +257,9 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--layout", required=True, help="the layout JSON (`afs fci-layout`)")
     parser.add_argument("--address", default="127.0.0.9", help="loopback address for the stub")
+    parser.add_argument("--model-at", nargs=14, type=float, metavar="X",
+                        help="instead of the wire check: libfranka's model at q (7 rad) and "
+                        "dq (7 rad/s), as JSON")
     args = parser.parse_args()
     with open(args.layout) as f:
         LAYOUT = json.load(f)
@@ -219,6 +270,10 @@ def main():
                           "pip install -r examples/python/requirements.txt"}))
         return 2
     mp.set_start_method("spawn")
+    if args.model_at:
+        result = model_at(args.address, LAYOUT, args.model_at[:7], args.model_at[7:])
+        print(json.dumps(result))
+        return 2 if "skipped" in result else (1 if "exception" in result else 0)
     out = mp.Queue()
     server = mp.Process(target=serve, args=(args.address, LAYOUT, 0, out))
     server.start()

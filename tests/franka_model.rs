@@ -1,0 +1,174 @@
+//! The FR3's kinematics and dynamics afs will take its torques from (franka-rs's native model,
+//! built from the URDF the robot serves; docs/franka.md, *The arm's model*), checked against
+//! their own definitions by numerical differentiation: the Jacobian is the pose's derivative,
+//! the Coriolis vector is the mass matrix's Christoffel form, the gravity vector is a gradient,
+//! and a point load at the flange adds `m J_vᵀ J_v` to the mass matrix and `−m J_vᵀ g` to the
+//! gravity. (tests/fci_wire.rs compares the same model with libfranka's.)
+
+use franka::model::{Frame, Model};
+use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
+
+type Q = SVector<f64, 7>;
+type M7 = SMatrix<f64, 7, 7>;
+type J6 = SMatrix<f64, 6, 7>;
+
+const GRAVITY: [f64; 3] = [0.0, 0.0, -9.81];
+const NO_INERTIA: [f64; 9] = [0.0; 9];
+const AT_FLANGE: [f64; 3] = [0.0; 3];
+/// Central differences' step (rad): truncation ~h², rounding ~1e-16/h.
+const H: f64 = 1e-5;
+
+fn model() -> Model {
+    Model::from_urdf(franka::model::FR3_URDF).expect("franka-rs's FR3 URDF parses")
+}
+
+/// Joint positions spread over the FR3's limits (lower, upper from its URDF), and rates.
+fn states() -> Vec<(Q, Q)> {
+    let lower = [-2.75, -1.79, -2.9, -3.04, -2.81, 0.55, -3.01];
+    let upper = [2.75, 1.79, 2.9, -0.15, 2.81, 4.52, 3.01];
+    (0..8)
+        .map(|k| {
+            let q = Q::from_fn(|i, _| {
+                let u = 0.5 + 0.45 * ((k * 7 + i) as f64 * 1.618).sin();
+                lower[i] + u * (upper[i] - lower[i])
+            });
+            let dq = Q::from_fn(|i, _| ((k * 5 + i) as f64 * 2.3).cos());
+            (q, dq)
+        })
+        .collect()
+}
+
+fn arr(q: &Q) -> [f64; 7] {
+    q.as_slice().try_into().unwrap()
+}
+
+fn flange_pose(m: &Model, q: &Q) -> (Matrix3<f64>, Vector3<f64>) {
+    let p = m.pose_q(Frame::Flange, &arr(q), &[0.0; 16], &[0.0; 16]);
+    let r = Matrix3::from_fn(|i, j| p[j * 4 + i]);
+    (r, Vector3::new(p[12], p[13], p[14]))
+}
+
+fn jacobian(m: &Model, q: &Q) -> J6 {
+    J6::from_column_slice(&m.zero_jacobian_q(Frame::Flange, &arr(q), &[0.0; 16], &[0.0; 16]))
+}
+
+fn mass(m: &Model, q: &Q, load_kg: f64) -> M7 {
+    M7::from_column_slice(&m.mass_q(&arr(q), &NO_INERTIA, load_kg, &AT_FLANGE))
+}
+
+fn gravity(m: &Model, q: &Q, load_kg: f64) -> Q {
+    Q::from_column_slice(&m.gravity_q(&arr(q), load_kg, &AT_FLANGE, &GRAVITY))
+}
+
+fn coriolis(m: &Model, q: &Q, dq: &Q) -> Q {
+    Q::from_column_slice(&m.coriolis_q(&arr(q), &arr(dq), &NO_INERTIA, 0.0, &AT_FLANGE, &GRAVITY))
+}
+
+fn step(q: &Q, i: usize, h: f64) -> Q {
+    let mut q = *q;
+    q[i] += h;
+    q
+}
+
+#[test]
+fn the_jacobian_is_the_flange_pose_s_derivative() {
+    let m = model();
+    for (q, _) in states() {
+        let j = jacobian(&m, &q);
+        let (r0, _) = flange_pose(&m, &q);
+        for i in 0..7 {
+            let (rp, pp) = flange_pose(&m, &step(&q, i, H));
+            let (rm, pm) = flange_pose(&m, &step(&q, i, -H));
+            let v = (pp - pm) / (2.0 * H);
+            // dR/dq_i · Rᵀ = [ω_i]×, the angular column in the base frame.
+            let w = (rp - rm) / (2.0 * H) * r0.transpose();
+            let omega = Vector3::new(
+                w[(2, 1)] - w[(1, 2)],
+                w[(0, 2)] - w[(2, 0)],
+                w[(1, 0)] - w[(0, 1)],
+            ) / 2.0;
+            let column = j.column(i);
+            let dv = (column.fixed_rows::<3>(0) - v).amax();
+            let dw = (column.fixed_rows::<3>(3) - omega).amax();
+            assert!(
+                dv < 1e-8 && dw < 1e-8,
+                "q {q:?}, joint {i}: linear off by {dv:e}, angular by {dw:e}"
+            );
+        }
+    }
+}
+
+#[test]
+fn the_mass_matrix_is_symmetric_and_positive_definite() {
+    let m = model();
+    for (q, _) in states() {
+        let a = mass(&m, &q, 0.0);
+        assert!((a - a.transpose()).amax() < 1e-12, "{a}");
+        assert!(
+            a.cholesky().is_some(),
+            "not positive definite at {q:?}: {a}"
+        );
+    }
+}
+
+/// `c(q, q̇) = Ṁ q̇ − ½ ∂(q̇ᵀ M q̇)/∂q`, with the mass matrix's derivatives by central
+/// differences.
+#[test]
+fn the_coriolis_vector_is_the_mass_matrix_s_christoffel_form() {
+    let m = model();
+    for (q, dq) in states() {
+        let dm: Vec<M7> = (0..7)
+            .map(|k| (mass(&m, &step(&q, k, H), 0.0) - mass(&m, &step(&q, k, -H), 0.0)) / (2.0 * H))
+            .collect();
+        let m_dot: M7 = (0..7).map(|k| dm[k] * dq[k]).sum();
+        let half_gradient = Q::from_fn(|i, _| 0.5 * (dq.transpose() * dm[i] * dq)[(0, 0)]);
+        let expected = m_dot * dq - half_gradient;
+        let got = coriolis(&m, &q, &dq);
+        let d = (got - expected).amax();
+        assert!(
+            d < 1e-6 * (1.0 + expected.amax()),
+            "q {q:?}: {got} against {expected} ({d:e})"
+        );
+    }
+}
+
+/// The gravity vector is the potential's gradient: its derivative is symmetric.
+#[test]
+fn the_gravity_vector_is_a_gradient() {
+    let m = model();
+    for (q, _) in states() {
+        let d = M7::from_fn(|i, k| {
+            (gravity(&m, &step(&q, k, H), 0.0)[i] - gravity(&m, &step(&q, k, -H), 0.0)[i])
+                / (2.0 * H)
+        });
+        let asymmetry = (d - d.transpose()).amax();
+        assert!(
+            asymmetry < 1e-6 * (1.0 + d.amax()),
+            "q {q:?}: {d} ({asymmetry:e})"
+        );
+    }
+}
+
+/// A point mass m at the flange's origin adds `m J_vᵀ J_v` to M and `−m J_vᵀ g` to the gravity
+/// vector (V = −m gᵀ p, J_v the flange Jacobian's linear rows).
+#[test]
+fn a_load_at_the_flange_adds_its_closed_forms() {
+    let m = model();
+    let load = 2.5;
+    let g = Vector3::from(GRAVITY);
+    for (q, _) in states() {
+        let jv = jacobian(&m, &q).fixed_rows::<3>(0).into_owned();
+        let dm = mass(&m, &q, load) - mass(&m, &q, 0.0);
+        let want_m = jv.transpose() * jv * load;
+        assert!(
+            (dm - want_m).amax() < 1e-9,
+            "q {q:?}: {dm} against {want_m}"
+        );
+        let dg = gravity(&m, &q, load) - gravity(&m, &q, 0.0);
+        let want_g = -(jv.transpose() * g) * load;
+        assert!(
+            (dg - want_g).amax() < 1e-9,
+            "q {q:?}: {dg} against {want_g}"
+        );
+    }
+}
