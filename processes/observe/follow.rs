@@ -129,7 +129,7 @@ impl Follower {
             sink(Rec::Wrench(*s.payload()));
         }
         while let Ok(Some(s)) = self.stats.receive() {
-            sink(Rec::Stats(*s.payload()));
+            sink(Rec::Stats(Box::new(*s.payload())));
         }
         while let Ok(Some(s)) = self.sensor_stats.receive() {
             sink(Rec::SensorStats(*s.payload()));
@@ -142,7 +142,7 @@ impl Follower {
         while let Ok(Some(s)) = self.status.receive() {
             any = true;
             let st = *s.payload();
-            sink(Rec::Status(st));
+            sink(Rec::Status(Box::new(st)));
             stopping |= SupervisorPhase::try_from(st.phase) == Ok(SupervisorPhase::Stopping);
             insertion |= msg::str_of(&st.scenario) == ScenarioKind::Insertion.name();
         }

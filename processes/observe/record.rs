@@ -39,8 +39,11 @@ pub struct Recorder {
     handle: JoinHandle<Result<RecordSummary>>,
 }
 
-/// Samples the channel holds before dropping (about 7 s of the stack's streams).
-const QUEUE: usize = 200_000;
+/// Samples the channel holds before dropping: about 13 s of the stack's streams at their
+/// fullest (the insertion at 10 kHz offers 47 000 a second), 600 000 × 240 bytes at most. On
+/// 2 cores the writer (JSON, zstd) can fall behind the stack for a whole 10-s run: with
+/// 200 000 (4 s), the insertion's stack test lost 1–6 % of its samples in 2 runs of 5.
+const QUEUE: usize = 600_000;
 
 impl Recorder {
     /// Starts recording to `path` (created or truncated).

@@ -13,7 +13,7 @@ use serde::Serialize;
 use std::time::Instant;
 
 /// One recorded sample.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub enum Rec {
     /// `/plant`.
     Plant(PlantSample),
@@ -21,12 +21,13 @@ pub enum Rec {
     Servo(ServoSample),
     /// `/wrench`.
     Wrench(WrenchSample),
-    /// `/loop_stats`.
-    Stats(LoopStats),
+    /// `/loop_stats` (boxed, as `/supervisor`: ten a second, and the largest variants; the
+    /// recorder's queue holds [`Rec`]s by value).
+    Stats(Box<LoopStats>),
     /// `/friction`.
     Friction(FrictionReport),
     /// `/supervisor`.
-    Status(SupervisorStatus),
+    Status(Box<SupervisorStatus>),
     /// `/sensor_stats`.
     SensorStats(SensorStats),
     /// `/live`: the tick's display record, from its world and controller samples.
@@ -257,5 +258,17 @@ mod schema_tests {
                 "{topic}: {ty} is not a message's type name"
             );
         }
+    }
+}
+
+#[cfg(test)]
+mod size_tests {
+    /// The recorder's queue holds `Rec`s by value and touches every slot when it starts
+    /// (observe/record.rs, `QUEUE`): the rare, large samples are boxed so that a slot stays at
+    /// the size of the largest per-tick one, the servo's sample.
+    #[test]
+    fn a_recorded_sample_is_no_larger_than_the_servo_s_with_its_tag() {
+        let servo = std::mem::size_of::<afs_shared::msg::ServoSample>();
+        assert!(std::mem::size_of::<super::Rec>() <= servo + 8);
     }
 }

@@ -41,7 +41,7 @@ impl Supervisor {
             };
         }
         let _ = self.ports.status.send_copy(st);
-        self.sinks.push(Rec::Status(st));
+        self.sinks.push(Rec::Status(Box::new(st)));
     }
 
     /// A progress line on stderr every second (rewritten in place on a terminal).

@@ -117,11 +117,14 @@ impl Sinks {
     }
 
     pub(super) fn push(&mut self, r: Rec) {
-        if let Some(x) = self.recorder.as_mut() {
-            x.push(r);
-        }
-        if let Some(v) = self.view.as_mut() {
-            v.push(r);
+        match (self.recorder.as_mut(), self.view.as_mut()) {
+            (Some(x), Some(v)) => {
+                v.push(r.clone());
+                x.push(r);
+            }
+            (Some(x), None) => x.push(r),
+            (None, Some(v)) => v.push(r),
+            (None, None) => {}
         }
     }
 }
@@ -190,7 +193,7 @@ impl Supervisor {
         }
         while let Ok(Some(s)) = self.ports.stats.receive() {
             self.stats = Some(*s.payload());
-            self.sinks.push(Rec::Stats(*s.payload()));
+            self.sinks.push(Rec::Stats(Box::new(*s.payload())));
         }
         while let Ok(Some(s)) = self.ports.friction.receive() {
             self.last_data[Board::Estimator as usize] = Instant::now();
