@@ -2,7 +2,7 @@
 """Checks a layout of the Franka Control Interface (FCI v10) against Franka's own client.
 
 A stub robot, built from the layout given with --layout (JSON: the message sizes and the
-RobotState's field offsets, as franka-rs declares them; `afs` prints it), serves pylibfranka
+RobotState's field offsets, as franka-rs declares them; tests/fci_wire.rs writes it), serves pylibfranka
 (Franka's bindings of libfranka) on a loopback address. The stub fills every state field with
 its own distinct values and records what the client sends. The client connects, reads the
 state, runs a torque-control motion for a few cycles, finishes it and asks for an automatic
@@ -210,19 +210,19 @@ def run_model_client(address, out):
         out.put({"exception": f"{type(e).__name__}: {e}"})
 
 
-def model_at(address, layout, q, dq):
-    """The official model's mass, Coriolis, gravity and Jacobian at (q, dq)."""
+def stub_and_client(address, layout, status, at, client_target):
+    """Starts the stub (Connect answered with `status`, its state at `at` or distinct values)
+    and `client_target` against it; returns the client's result once both have ended, or
+    {"skipped": why} when the stub cannot bind."""
     out = mp.Queue()
-    # O_ddP_O is the gravity vector the robot reports, which libfranka's gravity() takes.
-    at = {"q": q, "dq": dq, "O_ddP_O": [0.0, 0.0, -9.81]}
-    server = mp.Process(target=serve, args=(address, layout, 0, out, at))
+    server = mp.Process(target=serve, args=(address, layout, status, out, at))
     server.start()
     ready = out.get(timeout=10)
     if "error" in ready:
         server.join()
         return {"skipped": ready["error"]}
     client_out = mp.Queue()
-    client = mp.Process(target=run_model_client, args=(address, client_out))
+    client = mp.Process(target=client_target, args=(address, client_out))
     client.start()
     result = client_out.get(timeout=60)
     client.join()
@@ -231,22 +231,17 @@ def model_at(address, layout, q, dq):
     return result
 
 
+def model_at(address, layout, q, dq):
+    """The official model's mass, Coriolis, gravity and Jacobian at (q, dq)."""
+    # O_ddP_O is the gravity vector the robot reports, which libfranka's gravity() takes.
+    at = {"q": q, "dq": dq, "O_ddP_O": [0.0, 0.0, -9.81]}
+    return stub_and_client(address, layout, 0, at, run_model_client)
+
+
 def check_connect_refusal(address):
     """Status 1 in the (u8, u16) layout: the client names the version the reply carries."""
-    out = mp.Queue()
-    server = mp.Process(target=serve, args=(address, LAYOUT, 1, out))
-    server.start()
-    if "error" in out.get(timeout=10):
-        server.join()
-        return None
-    client_out = mp.Queue()
-    client = mp.Process(target=run_client, args=(address, client_out))
-    client.start()
-    result = client_out.get(timeout=30)
-    client.join()
-    server.terminate()
-    server.join()
-    return result.get("exception", "")
+    result = stub_and_client(address, LAYOUT, 1, None, run_client)
+    return None if "skipped" in result else result.get("exception", "")
 
 
 LAYOUT = None
@@ -255,7 +250,7 @@ LAYOUT = None
 def main():
     global LAYOUT
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--layout", required=True, help="the layout JSON (`afs fci-layout`)")
+    parser.add_argument("--layout", required=True, help="the layout JSON (tests/fci_wire.rs writes it: AFS_FCI_LAYOUT_OUT)")
     parser.add_argument("--address", default="127.0.0.9", help="loopback address for the stub")
     parser.add_argument("--model-at", nargs=14, type=float, metavar="X",
                         help="instead of the wire check: libfranka's model at q (7 rad) and "
