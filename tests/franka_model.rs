@@ -64,6 +64,14 @@ fn coriolis(m: &Model, q: &Q, dq: &Q) -> Q {
     Q::from_column_slice(&m.coriolis_q(&arr(q), &arr(dq), &NO_INERTIA, 0.0, &AT_FLANGE, &GRAVITY))
 }
 
+/// ∂f/∂q_k at q by central differences.
+fn central<T>(f: impl Fn(&Q) -> T, q: &Q, k: usize) -> T
+where
+    T: std::ops::Sub<Output = T> + std::ops::Div<f64, Output = T>,
+{
+    (f(&step(q, k, H)) - f(&step(q, k, -H))) / (2.0 * H)
+}
+
 fn step(q: &Q, i: usize, h: f64) -> Q {
     let mut q = *q;
     q[i] += h;
@@ -118,7 +126,7 @@ fn the_coriolis_vector_is_the_mass_matrix_s_christoffel_form() {
     let m = model();
     for (q, dq) in states() {
         let dm: Vec<M7> = (0..7)
-            .map(|k| (mass(&m, &step(&q, k, H), 0.0) - mass(&m, &step(&q, k, -H), 0.0)) / (2.0 * H))
+            .map(|k| central(|q| mass(&m, q, 0.0), &q, k))
             .collect();
         let m_dot: M7 = (0..7).map(|k| dm[k] * dq[k]).sum();
         let half_gradient = Q::from_fn(|i, _| 0.5 * (dq.transpose() * dm[i] * dq)[(0, 0)]);
@@ -137,10 +145,10 @@ fn the_coriolis_vector_is_the_mass_matrix_s_christoffel_form() {
 fn the_gravity_vector_is_a_gradient() {
     let m = model();
     for (q, _) in states() {
-        let d = M7::from_fn(|i, k| {
-            (gravity(&m, &step(&q, k, H), 0.0)[i] - gravity(&m, &step(&q, k, -H), 0.0)[i])
-                / (2.0 * H)
-        });
+        let columns: Vec<Q> = (0..7)
+            .map(|k| central(|q| gravity(&m, q, 0.0), &q, k))
+            .collect();
+        let d = M7::from_columns(&columns);
         let asymmetry = (d - d.transpose()).amax();
         assert!(
             asymmetry < 1e-6 * (1.0 + d.amax()),

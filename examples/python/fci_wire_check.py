@@ -238,17 +238,13 @@ def model_at(address, layout, q, dq):
     return stub_and_client(address, layout, 0, at, run_model_client)
 
 
-def check_connect_refusal(address):
+def check_connect_refusal(address, layout):
     """Status 1 in the (u8, u16) layout: the client names the version the reply carries."""
-    result = stub_and_client(address, LAYOUT, 1, None, run_client)
+    result = stub_and_client(address, layout, 1, None, run_client)
     return None if "skipped" in result else result.get("exception", "")
 
 
-LAYOUT = None
-
-
 def main():
-    global LAYOUT
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--layout", required=True, help="the layout JSON (tests/fci_wire.rs writes it: AFS_FCI_LAYOUT_OUT)")
     parser.add_argument("--address", default="127.0.0.9", help="loopback address for the stub")
@@ -257,7 +253,7 @@ def main():
                         "dq (7 rad/s), as JSON")
     args = parser.parse_args()
     with open(args.layout) as f:
-        LAYOUT = json.load(f)
+        layout = json.load(f)
     try:
         import pylibfranka  # noqa: F401
     except ImportError as e:
@@ -266,11 +262,11 @@ def main():
         return 2
     mp.set_start_method("spawn")
     if args.model_at:
-        result = model_at(args.address, LAYOUT, args.model_at[:7], args.model_at[7:])
+        result = model_at(args.address, layout, args.model_at[:7], args.model_at[7:])
         print(json.dumps(result))
         return 2 if "skipped" in result else (1 if "exception" in result else 0)
     out = mp.Queue()
-    server = mp.Process(target=serve, args=(args.address, LAYOUT, 0, out))
+    server = mp.Process(target=serve, args=(args.address, layout, 0, out))
     server.start()
     ready = out.get(timeout=10)
     if "error" in ready:
@@ -284,8 +280,8 @@ def main():
     client.join()
     stub = out.get(timeout=30)
     server.join()
-    report = compare(LAYOUT, stub, client_result)
-    report["connect"]["refusal"] = check_connect_refusal(args.address)
+    report = compare(layout, stub, client_result)
+    report["connect"]["refusal"] = check_connect_refusal(args.address, layout)
     report["connect"]["refusal_names_version_10"] = "server version: 10" in (
         report["connect"]["refusal"] or "")
     checks = [report["connect"]["agrees"], report["connect"]["refusal_names_version_10"],

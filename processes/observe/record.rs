@@ -40,7 +40,8 @@ pub struct Recorder {
 }
 
 /// Samples the channel holds before dropping: about 13 s of the stack's streams at their
-/// fullest (the insertion at 10 kHz offers 47 000 a second), 600 000 × 240 bytes at most. On
+/// fullest (the insertion at 10 kHz offers 47 000 a second); std's bounded channel allocates and
+/// touches its 600 000 slots (240 bytes and a stamp each, about 150 MB) when a recording starts. On
 /// 2 cores the writer (JSON, zstd) can fall behind the stack for a whole 10-s run: with
 /// 200 000 (4 s), the insertion's stack test lost 1–6 % of its samples in 2 runs of 5.
 const QUEUE: usize = 600_000;
