@@ -36,6 +36,7 @@ pub mod sim;
 pub mod surface;
 pub mod sweep;
 pub mod tangent;
+pub mod task_plane;
 pub mod tick;
 pub mod ticks;
 pub mod tuner;

@@ -103,3 +103,39 @@ fn a_step_on_mujoco_allocates_nothing() {
         assert_eq!(ALLOCATIONS.with(Cell::get) - before, 0);
     }
 }
+
+/// The seven-joint arm's cycle: its planar coordinates, the wrench, the joint torques with the
+/// null-space projection (two Cholesky factorisations) and the limits.
+#[test]
+fn the_task_plane_cycle_allocates_nothing() {
+    use afs_shared::task_plane::{
+        Hold, Jacobian, Joints, MassMatrix, TaskPlane, TorqueLimits, joint_torques, limit_torques,
+    };
+    use nalgebra::{Matrix3, Vector2, Vector3};
+    let plane = TaskPlane::new(Matrix3::identity(), Vector3::zeros(), Matrix3::identity())
+        .expect("rotations");
+    let hold = Hold {
+        normal_stiffness_n_per_m: 800.0,
+        normal_damping_n_s_per_m: 60.0,
+        tilt_stiffness_nm_per_rad: 40.0,
+        tilt_damping_nm_s_per_rad: 2.0,
+        null_stiffness_nm_per_rad: 4.0,
+        null_damping_nm_s_per_rad: 0.8,
+    };
+    let j = Jacobian::from_fn(|r, c| ((r * 7 + c) as f64 * 0.7).sin());
+    let a = MassMatrix::from_fn(|r, c| ((r * 7 + c) as f64 * 1.3).cos());
+    let mass = a * a.transpose() + MassMatrix::identity();
+    let limits = TorqueLimits::fr3();
+    let mut last = Joints::zeros();
+    let before = ALLOCATIONS.with(Cell::get);
+    for k in 0..1000 {
+        let q = Joints::repeat(f64::from(k) * 1e-4);
+        let (r, p) = plane.pose(Vector2::new(0.01, 0.0), 0.1, 0.0);
+        let s = plane.planar(&r, &p, &j, &q);
+        let w = plane.wrench(&s, Vector2::new(1.0, 2.0), 0.1, 0.0, &hold);
+        let (tau, _) = joint_torques(&j, &mass, &q, &q, &q, &Joints::zeros(), &w, &hold);
+        last = limit_torques(&tau, &last, &limits, 1e-3).torque_nm;
+        std::hint::black_box(last);
+    }
+    assert_eq!(ALLOCATIONS.with(Cell::get) - before, 0);
+}
