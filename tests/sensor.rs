@@ -85,7 +85,8 @@ fn every_scenario_passes_on_the_emulated_sensor() {
     ] {
         let p = prefix(&format!("rdt{}", &scenario[..4]));
         let _clean = CleanPrefix(p.clone());
-        let (out, r) = run_rdt(&p, &stack, &["--scenario", scenario, "--duration", "8"]);
+        // 6 s: long enough for each scenario's checks (a tangent estimate, a friction window).
+        let (out, r) = run_rdt(&p, &stack, &["--scenario", scenario, "--duration", "6"]);
         assert!(
             out.status.success() && r.passed,
             "{scenario}: {}\n{}",
@@ -95,7 +96,7 @@ fn every_scenario_passes_on_the_emulated_sensor() {
         assert!(r.agreement.agrees, "{scenario}: {:#?}", r.agreement);
         let s = r.sensor.expect("the sensor board's statistics");
         let d = s.rdt.expect("an RDT source");
-        assert!(d.records > 40_000, "{scenario}: {d:?}");
+        assert!(d.records > 30_000, "{scenario}: {d:?}");
         assert_eq!(
             (
                 d.lost,
