@@ -4,7 +4,9 @@
 //! below both: neither imports the other for it.
 
 mod footprint;
+mod robot;
 mod timeline;
+pub use robot::RobotTable;
 
 pub use footprint::Footprint;
 pub use timeline::Timeline;
@@ -105,6 +107,9 @@ pub struct StackFile {
     /// What `afs chaos` needs beyond the processes.
     #[serde(default)]
     pub chaos: Option<ChaosTable>,
+    /// A robot for the servo to drive (issue 48; checked, not driven yet).
+    #[serde(default)]
+    pub robot: Option<RobotTable>,
 }
 
 /// The `[chaos]` table: how to cut the link and restore it (the `cut-link` fault; on real
@@ -191,6 +196,9 @@ impl StackFile {
                     c.cut_for_s
                 );
             }
+        }
+        if let Some(r) = &self.robot {
+            r.check()?;
         }
         for role in [Board::Servo, Board::Sensor] {
             if self.spec(role).is_none() {
@@ -406,6 +414,13 @@ pub fn load_stack(opts: &RunOptions) -> Result<StackFile> {
     }
     opts.sim.apply(&mut s.sim)?;
     s.check()?;
+    if let Some(r) = &s.robot {
+        bail!(
+            "[robot] kind = \"{}\" at {}: the table is valid, but the servo does not drive a robot yet (issue 48, docs/franka.md); remove [robot] to run the simulated world",
+            r.kind,
+            r.address
+        );
+    }
     Ok(s)
 }
 

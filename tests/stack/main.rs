@@ -314,6 +314,22 @@ fn bad_input_is_refused_clearly() {
     .unwrap();
     let bare = dir.join("bare.toml");
     std::fs::write(&bare, "[servo]\ninertia_feedforward = false\n").unwrap();
+    // A [robot] table: a tool transform that is not rigid is named; a valid table is refused
+    // because the servo does not drive a robot yet.
+    let robot = |tip: &str| {
+        format!(
+            "{}\n[robot]\nkind = \"franka\"\naddress = \"127.0.0.1\"\n[robot.task_frame]\n\
+             origin_m = [0.45, 0.0, 0.2]\nx_axis = [1.0, 0.0, 0.0]\nnormal = [0.0, 0.0, 1.0]\n\
+             [robot.tool]\nflange_to_tip = [{tip}]\nmass_kg = 0.7\n",
+            afs::stack::DEFAULT_STACK
+        )
+    };
+    let identity = "1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.1, 1.0";
+    let sheared = identity.replacen("0.0", "0.3", 1);
+    let robot_ok = dir.join("robot.toml");
+    std::fs::write(&robot_ok, robot(identity)).unwrap();
+    let robot_bad = dir.join("robot-bad.toml");
+    std::fs::write(&robot_bad, robot(&sheared)).unwrap();
     let missing_bin = dir.join("missing.toml");
     // A board that cannot start fails the run after the prefix was claimed: it is given back.
     let missing_prefix = prefix("nobin");
@@ -376,6 +392,22 @@ fn bad_input_is_refused_clearly() {
                 missing_bin.display().to_string(),
             ],
             "not found",
+        ),
+        (
+            vec![
+                "run".into(),
+                "--config".into(),
+                robot_bad.display().to_string(),
+            ],
+            "flange_to_tip is not a rigid transform",
+        ),
+        (
+            vec![
+                "run".into(),
+                "--config".into(),
+                robot_ok.display().to_string(),
+            ],
+            "the servo does not drive a robot yet",
         ),
         (
             vec!["run".into(), "--rate-hz".into(), "0".into()],

@@ -1,0 +1,324 @@
+//! A stack file's `[robot]` table (issue 48, docs/franka.md): the arm the servo will drive
+//! over FCI, the thesis's plane in its base frame, the tool on its flange and the limits.
+//! Checked when the file is read, each bad entry named in one line; the servo does not drive
+//! a robot yet, so a run with the table is refused after the checks.
+
+use afs_shared::task_plane::{FrameError, TaskPlane, check_rotation};
+use anyhow::{Result, bail};
+use nalgebra::{Matrix3, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// The `[robot]` table.
+#[derive(Debug, Clone, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct RobotTable {
+    /// The arm: `"franka"` (an FR3 over FCI, server version 10).
+    pub kind: String,
+    /// The robot's FCI address: an IP address or host name, with `:port` if not 1337.
+    pub address: String,
+    /// The thesis's plane in the robot's base frame.
+    pub task_frame: TaskFrame,
+    /// The tool on the flange.
+    pub tool: Tool,
+    /// Where the servo holds instead of going on.
+    #[serde(default)]
+    pub limits: Limits,
+}
+
+/// The task plane: its origin, its x axis and its normal in the robot's base frame (the y
+/// axis is `normal × x`), and the tool's orientation in it at θ = 0.
+#[derive(Debug, Clone, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct TaskFrame {
+    /// The plane's origin (m).
+    pub origin_m: [f64; 3],
+    /// The plane's x axis (a unit vector).
+    pub x_axis: [f64; 3],
+    /// The plane's normal (a unit vector, at right angles to the x axis).
+    pub normal: [f64; 3],
+    /// The tool's orientation in the plane's frame at θ = 0, row by row (default: the tool's
+    /// z axis against the normal, as a flange pointing down onto a table: `Rx(π)`).
+    #[serde(default = "pointing_into_the_plane")]
+    pub tool_mount: [[f64; 3]; 3],
+}
+
+fn pointing_into_the_plane() -> [[f64; 3]; 3] {
+    [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]]
+}
+
+/// The tool: flange to tool tip as a homogeneous transform, column-major as libfranka's
+/// `F_T_EE`, and its mass.
+#[derive(Debug, Clone, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Tool {
+    /// The 4×4 transform from the flange to the tool tip, column by column (m).
+    pub flange_to_tip: [f64; 16],
+    /// The tool's mass, the force sensor's included (kg).
+    pub mass_kg: f64,
+}
+
+/// The limits that end in a hold.
+#[derive(Debug, Clone, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct Limits {
+    /// The largest contact force the servo lets through before it holds (N).
+    pub contact_force_n: f64,
+    /// The workspace box in the plane: x, y and the normal offset, each `[low, high]` (m).
+    pub workspace_m: [[f64; 2]; 3],
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Self {
+            contact_force_n: 30.0,
+            workspace_m: [[-0.15, 0.15], [-0.15, 0.15], [-0.05, 0.05]],
+        }
+    }
+}
+
+/// The FR3's payload (kg), Franka's datasheet.
+pub const FR3_PAYLOAD_KG: f64 = 3.0;
+/// The FR3's reach from its shoulder (m), Franka's datasheet: joint 2's axis is 0.333 m above
+/// the base, and no point farther than this from it can be the tool's.
+pub const FR3_REACH_M: f64 = 0.855;
+const FR3_SHOULDER_M: [f64; 3] = [0.0, 0.0, 0.333];
+
+impl RobotTable {
+    /// Checks the table; each error names the entry and says what to give.
+    ///
+    /// # Errors
+    /// The first bad entry.
+    pub fn check(&self) -> Result<()> {
+        if self.kind != "franka" {
+            bail!(
+                "[robot] kind = \"{}\": the only kind is \"franka\" (an FR3 over FCI)",
+                self.kind
+            );
+        }
+        check_address(&self.address)?;
+        self.plane()?;
+        let origin = Vector3::from(self.task_frame.origin_m);
+        let shoulder = Vector3::from(FR3_SHOULDER_M);
+        let reach = (origin - shoulder).norm();
+        if reach > FR3_REACH_M {
+            bail!(
+                "[robot.task_frame] origin_m = {:?} is {reach:.3} m from the FR3's shoulder (0, 0, 0.333), out of its {FR3_REACH_M} m reach: put the plane within it",
+                self.task_frame.origin_m
+            );
+        }
+        self.check_tool()?;
+        let l = &self.limits;
+        if !(l.contact_force_n.is_finite() && l.contact_force_n > 0.0) {
+            bail!(
+                "[robot.limits] contact_force_n = {} must be a force above 0 N",
+                l.contact_force_n
+            );
+        }
+        for (axis, [lo, hi]) in ["x", "y", "normal"].iter().zip(l.workspace_m) {
+            if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+                bail!(
+                    "[robot.limits] workspace_m's {axis} range [{lo}, {hi}] must be two numbers, low before high (m)"
+                );
+            }
+        }
+        Ok(())
+    }
+
+    /// The task plane, its axes checked.
+    ///
+    /// # Errors
+    /// An axis that is not a unit vector, axes not at right angles, or a mount that is not a
+    /// rotation.
+    pub fn plane(&self) -> Result<TaskPlane> {
+        let f = &self.task_frame;
+        let x = Vector3::from(f.x_axis);
+        let n = Vector3::from(f.normal);
+        for (name, v) in [("x_axis", x), ("normal", n)] {
+            if !(v.iter().all(|c| c.is_finite()) && (v.norm() - 1.0).abs() < 1e-6) {
+                bail!(
+                    "[robot.task_frame] {name} = {:?} must be a unit vector (its length is {})",
+                    v.as_slice(),
+                    v.norm()
+                );
+            }
+        }
+        if x.dot(&n).abs() > 1e-6 {
+            bail!(
+                "[robot.task_frame] x_axis and normal must be at right angles (x·n = {:.2e})",
+                x.dot(&n)
+            );
+        }
+        let r = Matrix3::from_columns(&[x, n.cross(&x), n]);
+        let mount = Matrix3::from_fn(|i, j| f.tool_mount[i][j]);
+        TaskPlane::new(r, Vector3::from(f.origin_m), mount)
+            .map_err(|e: FrameError| anyhow::anyhow!("[robot.task_frame] {e}"))
+    }
+
+    fn check_tool(&self) -> Result<()> {
+        let t = &self.tool.flange_to_tip;
+        let rotation = Matrix3::from_fn(|i, j| t[j * 4 + i]);
+        if let Err(e) = check_rotation(&rotation, "tool transform's rotation") {
+            bail!("[robot.tool] flange_to_tip is not a rigid transform: {e}");
+        }
+        let last_row = [t[3], t[7], t[11], t[15]];
+        if last_row != [0.0, 0.0, 0.0, 1.0] {
+            bail!(
+                "[robot.tool] flange_to_tip's last row is {last_row:?}, not [0, 0, 0, 1]: give the 4×4 transform column by column, as libfranka's F_T_EE"
+            );
+        }
+        if !t[12..15].iter().all(|v| v.is_finite() && v.abs() <= 0.5) {
+            bail!(
+                "[robot.tool] flange_to_tip's translation {:?} must be within 0.5 m of the flange (m)",
+                &t[12..15]
+            );
+        }
+        let m = self.tool.mass_kg;
+        if !(m.is_finite() && (0.0..=FR3_PAYLOAD_KG).contains(&m)) {
+            bail!("[robot.tool] mass_kg = {m} must be 0 to the FR3's payload, {FR3_PAYLOAD_KG} kg");
+        }
+        Ok(())
+    }
+}
+
+/// An FCI address: a host (an IP address or a name) with an optional `:port` (1 to 65535).
+fn check_address(address: &str) -> Result<()> {
+    let bad = || {
+        anyhow::anyhow!(
+            "[robot] address = \"{address}\" is not a host: give the robot's IP address or name, with :port if not 1337"
+        )
+    };
+    if address.parse::<std::net::SocketAddr>().is_ok()
+        || address.parse::<std::net::IpAddr>().is_ok()
+    {
+        return Ok(());
+    }
+    let (host, port) = match address.rsplit_once(':') {
+        Some((h, p)) => (h, Some(p)),
+        None => (address, None),
+    };
+    if let Some(p) = port
+        && !p.parse::<u16>().is_ok_and(|p| p > 0)
+    {
+        return Err(bad());
+    }
+    let label_ok = |l: &str| {
+        !l.is_empty()
+            && l.len() <= 63
+            && l.chars().all(|c| c.is_ascii_alphanumeric() || c == '-')
+            && !l.starts_with('-')
+            && !l.ends_with('-')
+    };
+    if host.is_empty() || host.len() > 253 || !host.split('.').all(label_ok) {
+        return Err(bad());
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn table() -> RobotTable {
+        toml::from_str(
+            r#"
+            kind = "franka"
+            address = "172.16.0.2"
+            [task_frame]
+            origin_m = [0.45, 0.0, 0.2]
+            x_axis = [1.0, 0.0, 0.0]
+            normal = [0.0, 0.0, 1.0]
+            [tool]
+            flange_to_tip = [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0.1034, 1]
+            mass_kg = 0.7
+            "#,
+        )
+        .expect("the table parses")
+    }
+
+    fn refused(edit: impl FnOnce(&mut RobotTable)) -> String {
+        let mut t = table();
+        edit(&mut t);
+        t.check().expect_err("refused").to_string()
+    }
+
+    #[test]
+    fn a_good_table_passes_and_gives_its_plane() {
+        let t = table();
+        t.check().unwrap();
+        let p = t.plane().unwrap();
+        assert_eq!(*p.rotation(), Matrix3::identity());
+        for address in ["172.16.0.2:1337", "fr3.lab", "robot-1", "[::1]:1337", "::1"] {
+            check_address(address).unwrap_or_else(|e| panic!("{address}: {e}"));
+        }
+    }
+
+    type Edit = Box<dyn FnOnce(&mut RobotTable)>;
+
+    #[test]
+    fn each_bad_entry_is_named() {
+        let cases: Vec<(Edit, &str)> = vec![
+            (
+                Box::new(|t| t.kind = "ur5".into()),
+                "the only kind is \"franka\"",
+            ),
+            (
+                Box::new(|t| t.address = "a b".into()),
+                "address = \"a b\" is not a host",
+            ),
+            (Box::new(|t| t.address = "fr3:0".into()), "is not a host"),
+            (
+                Box::new(|t| t.address = "fr3:99999".into()),
+                "is not a host",
+            ),
+            (
+                Box::new(|t| t.task_frame.x_axis = [1.0, 0.1, 0.0]),
+                "x_axis = [1.0, 0.1, 0.0] must be a unit vector",
+            ),
+            (
+                Box::new(|t| t.task_frame.normal = [1.0, 0.0, 0.0]),
+                "at right angles",
+            ),
+            (
+                Box::new(|t| t.task_frame.normal = [0.0, 0.0, f64::NAN]),
+                "normal",
+            ),
+            (
+                Box::new(|t| t.task_frame.tool_mount[2][2] = 1.0),
+                "the tool's mount is not a rotation",
+            ),
+            (
+                Box::new(|t| t.task_frame.origin_m = [1.2, 0.0, 0.2]),
+                "out of its 0.855 m reach",
+            ),
+            (
+                Box::new(|t| t.tool.flange_to_tip[0] = 1.1),
+                "flange_to_tip is not a rigid transform",
+            ),
+            (
+                Box::new(|t| t.tool.flange_to_tip[10] = -1.0),
+                "not a rigid transform",
+            ),
+            (
+                Box::new(|t| t.tool.flange_to_tip[3] = 0.2),
+                "last row is [0.2, 0.0, 0.0, 1.0]",
+            ),
+            (
+                Box::new(|t| t.tool.flange_to_tip[14] = 2.0),
+                "within 0.5 m of the flange",
+            ),
+            (Box::new(|t| t.tool.mass_kg = 4.0), "payload, 3 kg"),
+            (
+                Box::new(|t| t.limits.contact_force_n = 0.0),
+                "contact_force_n = 0",
+            ),
+            (
+                Box::new(|t| t.limits.workspace_m[2] = [0.1, -0.1]),
+                "normal range [0.1, -0.1]",
+            ),
+        ];
+        for (edit, want) in cases {
+            let e = refused(edit);
+            assert!(e.contains(want), "wanted {want:?} in: {e}");
+        }
+    }
+}
