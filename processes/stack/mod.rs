@@ -6,9 +6,9 @@
 mod footprint;
 mod robot;
 mod timeline;
-pub use robot::RobotTable;
 
 pub use footprint::Footprint;
+pub use robot::RobotTable;
 pub use timeline::Timeline;
 
 use crate::ipc;

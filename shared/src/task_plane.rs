@@ -245,7 +245,7 @@ pub struct Hold {
 }
 
 /// The joint torques for wrench `wrench` (base frame) at the tool, plus the null-space
-/// impedance toward `posture` and the Coriolis torque `coriolis`; `None` in the second slot
+/// impedance toward `posture` and the Coriolis torque `coriolis`; `false` in the second slot
 /// when `J M⁻¹ Jᵀ` is singular (the arm at a singularity: no null-space term is added).
 #[must_use]
 #[allow(clippy::too_many_arguments)]
