@@ -140,86 +140,193 @@ fn write_all(file: std::fs::File, rx: Receiver<Rec>, path: PathBuf) -> Result<Re
 
 /// Every message of a recording, by topic, as JSON values in recorded order.
 pub fn read(path: &Path) -> Result<BTreeMap<String, Vec<serde_json::Value>>> {
+    let mut out: BTreeMap<String, Vec<serde_json::Value>> = BTreeMap::new();
+    each_message(path, |topic, data| {
+        let v: serde_json::Value = serde_json::from_slice(data)
+            .with_context(|| format!("a message on {topic} is not JSON"))?;
+        out.entry(topic.to_string()).or_default().push(v);
+        Ok(())
+    })?;
+    Ok(out)
+}
+
+/// Calls `f` with each message's topic and JSON bytes, in recorded order, holding one message
+/// at a time: a recording is read without being parsed whole.
+fn each_message(path: &Path, mut f: impl FnMut(&str, &[u8]) -> Result<()>) -> Result<()> {
     let bytes =
         std::fs::read(path).with_context(|| format!("reading recording {}", path.display()))?;
-    let mut out: BTreeMap<String, Vec<serde_json::Value>> = BTreeMap::new();
     let stream = mcap::MessageStream::new(&bytes)
         .with_context(|| format!("{} is not an MCAP file", path.display()))?;
     for m in stream {
         let m = m.with_context(|| format!("a damaged record in {}", path.display()))?;
-        let v: serde_json::Value = serde_json::from_slice(&m.data)
-            .with_context(|| format!("a message on {} is not JSON", m.channel.topic))?;
-        out.entry(m.channel.topic.clone()).or_default().push(v);
+        f(&m.channel.topic, &m.data)?;
     }
-    Ok(out)
+    Ok(())
 }
 
-/// A message's fields as (column, value) pairs: nested objects as `a.b`, arrays as `a[i]`,
-/// strings without their JSON quotes.
-fn flatten(prefix: &str, v: &serde_json::Value, out: &mut Vec<(String, String)>) {
-    match v {
-        serde_json::Value::Object(m) => {
-            for (k, x) in m {
-                let key = if prefix.is_empty() {
-                    k.clone()
-                } else {
-                    format!("{prefix}.{k}")
-                };
-                flatten(&key, x, out);
-            }
-        }
-        serde_json::Value::Array(a) => {
-            for (i, x) in a.iter().enumerate() {
-                flatten(&format!("{prefix}[{i}]"), x, out);
-            }
-        }
-        serde_json::Value::String(text) => out.push((prefix.to_string(), text.clone())),
-        serde_json::Value::Null => out.push((prefix.to_string(), String::new())),
-        other => out.push((prefix.to_string(), other.to_string())),
+/// A message's fields as CSV columns (`a.b`, `a[i]`) and values (strings without their JSON
+/// quotes, null as empty), in buffers kept from one message to the next: a long recording is
+/// exported without an allocation per field.
+#[derive(Default)]
+struct Flat {
+    keys: Vec<String>,
+    values: Vec<String>,
+    len: usize,
+    key: String,
+}
+
+impl Flat {
+    fn fill(&mut self, v: &serde_json::Value) {
+        self.len = 0;
+        self.key.clear();
+        self.visit(v);
     }
+
+    fn visit(&mut self, v: &serde_json::Value) {
+        use std::fmt::Write;
+        let at = self.key.len();
+        match v {
+            serde_json::Value::Object(m) => {
+                for (k, x) in m {
+                    if at > 0 {
+                        self.key.push('.');
+                    }
+                    self.key.push_str(k);
+                    self.visit(x);
+                    self.key.truncate(at);
+                }
+                return;
+            }
+            serde_json::Value::Array(a) => {
+                for (i, x) in a.iter().enumerate() {
+                    let _ = write!(self.key, "[{i}]");
+                    self.visit(x);
+                    self.key.truncate(at);
+                }
+                return;
+            }
+            _ => {}
+        }
+        if self.len == self.keys.len() {
+            self.keys.push(String::new());
+            self.values.push(String::new());
+        }
+        let (key, value) = (&mut self.keys[self.len], &mut self.values[self.len]);
+        key.clear();
+        key.push_str(&self.key);
+        value.clear();
+        match v {
+            serde_json::Value::String(text) => value.push_str(text),
+            serde_json::Value::Null => {}
+            other => {
+                let _ = write!(value, "{other}");
+            }
+        }
+        self.len += 1;
+    }
+
+    fn keys(&self) -> &[String] {
+        &self.keys[..self.len]
+    }
+
+    fn values(&self) -> &[String] {
+        &self.values[..self.len]
+    }
+}
+
+/// One topic's CSV file: its columns are its first message's fields.
+struct TopicCsv {
+    writer: csv::Writer<std::fs::File>,
+    head: Vec<String>,
+    path: PathBuf,
 }
 
 /// Writes one CSV per topic into `dir` (`plant.csv`, `servo.csv`, …); returns the files. The
 /// columns are the first message's fields; a field another message lacks is left empty.
 pub fn export_csv(recording: &Path, dir: &Path) -> Result<Vec<PathBuf>> {
-    let topics = read(recording)?;
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let mut files = Vec::new();
-    for (topic, msgs) in topics {
-        let Some(first) = msgs.first() else { continue };
-        let mut head = Vec::new();
-        flatten("", first, &mut head);
-        let path = dir.join(format!("{}.csv", topic.trim_start_matches('/')));
-        let mut w = csv::Writer::from_path(&path)
-            .with_context(|| format!("creating {}", path.display()))?;
-        w.write_record(head.iter().map(|h| h.0.as_str()))
-            .with_context(|| format!("writing {}", path.display()))?;
-        let mut fields = Vec::new();
-        for m in &msgs {
-            fields.clear();
-            flatten("", m, &mut fields);
-            let by_name: BTreeMap<&str, &str> = fields
+    let mut files: BTreeMap<String, TopicCsv> = BTreeMap::new();
+    let mut flat = Flat::default();
+    each_message(recording, |topic, data| {
+        let v: serde_json::Value = serde_json::from_slice(data)
+            .with_context(|| format!("a message on {topic} is not JSON"))?;
+        flat.fill(&v);
+        if !files.contains_key(topic) {
+            let path = dir.join(format!("{}.csv", topic.trim_start_matches('/')));
+            let mut writer = csv::Writer::from_path(&path)
+                .with_context(|| format!("creating {}", path.display()))?;
+            writer
+                .write_record(flat.keys())
+                .with_context(|| format!("writing {}", path.display()))?;
+            let head = flat.keys().to_vec();
+            files.insert(topic.to_string(), TopicCsv { writer, head, path });
+        }
+        let file = files.get_mut(topic).expect("inserted above");
+        let written = if flat.keys() == file.head.as_slice() {
+            file.writer.write_record(flat.values())
+        } else {
+            let by_name: BTreeMap<&str, &str> = flat
+                .keys()
                 .iter()
+                .zip(flat.values())
                 .map(|(k, v)| (k.as_str(), v.as_str()))
                 .collect();
-            w.write_record(
-                head.iter()
-                    .map(|h| by_name.get(h.0.as_str()).copied().unwrap_or("")),
+            file.writer.write_record(
+                file.head
+                    .iter()
+                    .map(|h| by_name.get(h.as_str()).copied().unwrap_or("")),
             )
-            .with_context(|| format!("writing {}", path.display()))?;
-        }
-        w.flush()
-            .with_context(|| format!("writing {}", path.display()))?;
-        files.push(path);
+        };
+        written.with_context(|| format!("writing {}", file.path.display()))
+    })?;
+    let mut out = Vec::new();
+    for (_, mut file) in files {
+        file.writer
+            .flush()
+            .with_context(|| format!("writing {}", file.path.display()))?;
+        out.push(file.path);
     }
-    Ok(files)
+    Ok(out)
+}
+
+/// The messages of `wanted` topics, at most about `points` of each, evenly spaced: counted in
+/// one pass, and only the kept ones parsed in a second.
+fn sample_topics(
+    path: &Path,
+    wanted: &[&str],
+    points: usize,
+) -> Result<BTreeMap<String, Vec<serde_json::Value>>> {
+    let mut counts: BTreeMap<String, usize> = BTreeMap::new();
+    each_message(path, |topic, _| {
+        if wanted.contains(&topic) {
+            *counts.entry(topic.to_string()).or_default() += 1;
+        }
+        Ok(())
+    })?;
+    let mut seen: BTreeMap<String, usize> = BTreeMap::new();
+    let mut out: BTreeMap<String, Vec<serde_json::Value>> = BTreeMap::new();
+    each_message(path, |topic, data| {
+        let Some(&n) = counts.get(topic) else {
+            return Ok(());
+        };
+        let i = seen.entry(topic.to_string()).or_default();
+        let keep = i.is_multiple_of((n / points).max(1));
+        *i += 1;
+        if keep {
+            let v: serde_json::Value = serde_json::from_slice(data)
+                .with_context(|| format!("a message on {topic} is not JSON"))?;
+            out.entry(topic.to_string()).or_default().push(v);
+        }
+        Ok(())
+    })?;
+    Ok(out)
 }
 
 /// The force, position and dither histories of a recording as a figure (at most about 4000
 /// points per series).
 pub fn figure(recording: &Path) -> Result<afs_shared::experiments::Figure> {
     use afs_shared::experiments::{Figure, Panel, Series};
-    let topics = read(recording)?;
+    let topics = sample_topics(recording, &["/plant", "/servo"], 4000)?;
     let empty = Vec::new();
     let plant = topics.get("/plant").unwrap_or(&empty);
     let servo = topics.get("/servo").unwrap_or(&empty);
@@ -229,10 +336,8 @@ pub fn figure(recording: &Path) -> Result<afs_shared::experiments::Figure> {
             recording.display()
         );
     }
-    let every = |n: usize| (n / 4000).max(1);
     let pick = |msgs: &[serde_json::Value], f: &dyn Fn(&serde_json::Value) -> Option<f64>| {
         msgs.iter()
-            .step_by(every(msgs.len()))
             .filter_map(|m| Some([m["time_s"].as_f64()?, f(m)?]))
             .collect::<Vec<_>>()
     };
@@ -297,17 +402,19 @@ pub fn figure(recording: &Path) -> Result<afs_shared::experiments::Figure> {
 
 #[cfg(test)]
 mod tests {
-    use super::flatten;
+    use super::{Flat, export_csv, sample_topics};
     use serde_json::json;
 
     #[test]
     fn fields_flatten_to_columns_with_plain_strings() {
-        let mut out = Vec::new();
-        flatten(
-            "",
-            &json!({"a": 1.5, "b": {"c": [1, 2]}, "mode": "probing, fast", "x": null}),
-            &mut out,
-        );
+        let mut flat = Flat::default();
+        flat.fill(&json!({"a": 1.5, "b": {"c": [1, 2]}, "mode": "probing, fast", "x": null}));
+        let got: Vec<(&str, &str)> = flat
+            .keys()
+            .iter()
+            .zip(flat.values())
+            .map(|(k, v)| (k.as_str(), v.as_str()))
+            .collect();
         let want = [
             ("a", "1.5"),
             ("b.c[0]", "1"),
@@ -315,13 +422,84 @@ mod tests {
             ("mode", "probing, fast"),
             ("x", ""),
         ];
-        let got: Vec<(&str, &str)> = out.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
         assert_eq!(got, want);
         // The csv crate quotes the comma.
         let mut w = csv::Writer::from_writer(Vec::new());
-        w.write_record(out.iter().map(|f| f.1.as_str())).unwrap();
+        w.write_record(flat.values()).unwrap();
         let text = String::from_utf8(w.into_inner().unwrap()).unwrap();
         assert_eq!(text, "1.5,1,2,\"probing, fast\",\n");
+        // The buffers are reused: a shorter message leaves nothing of the longer one.
+        flat.fill(&json!({"b": [true]}));
+        assert_eq!(flat.keys(), ["b[0]"]);
+        assert_eq!(flat.values(), ["true"]);
+    }
+
+    /// A recording of `messages` (topic, JSON), written as the recorder writes one.
+    fn recording(
+        dir: &std::path::Path,
+        messages: &[(&str, serde_json::Value)],
+    ) -> std::path::PathBuf {
+        let path = dir.join("r.mcap");
+        let file = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
+        let mut w = mcap::WriteOptions::new()
+            .compression(Some(mcap::Compression::Zstd))
+            .create(file)
+            .unwrap();
+        let mut channels = std::collections::BTreeMap::new();
+        for (i, (topic, v)) in messages.iter().enumerate() {
+            let ch = *channels.entry(*topic).or_insert_with(|| {
+                let schema = w.add_schema("t", "jsonschema", b"{}").unwrap();
+                w.add_channel(schema, topic, "json", &Default::default())
+                    .unwrap()
+            });
+            let header = mcap::records::MessageHeader {
+                channel_id: ch,
+                sequence: i as u32,
+                log_time: i as u64,
+                publish_time: i as u64,
+            };
+            w.write_to_known_channel(&header, &serde_json::to_vec(v).unwrap())
+                .unwrap();
+        }
+        w.finish().unwrap();
+        path
+    }
+
+    #[test]
+    fn the_export_keeps_the_first_messages_columns_and_the_plot_samples_evenly() {
+        let dir = std::env::temp_dir().join(format!("afs-export-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut messages = vec![
+            ("/servo", json!({"t": 0, "f": [1.0, 2.0], "mode": "a"})),
+            ("/plant", json!({"t": 0, "u": 5})),
+            // A field missing, one unknown, and the rest in their places.
+            ("/servo", json!({"t": 1, "f": [3.0, 4.0], "extra": 9})),
+            ("/servo", json!({"t": 2, "f": [5.0, 6.0], "mode": "b"})),
+        ];
+        let rec = recording(&dir, &messages);
+        let out = dir.join("csv");
+        let files = export_csv(&rec, &out).unwrap();
+        assert_eq!(files, [out.join("plant.csv"), out.join("servo.csv")]);
+        let servo = std::fs::read_to_string(out.join("servo.csv")).unwrap();
+        assert_eq!(
+            servo,
+            "f[0],f[1],mode,t\n1.0,2.0,a,0\n3.0,4.0,,1\n5.0,6.0,b,2\n"
+        );
+        let plant = std::fs::read_to_string(out.join("plant.csv")).unwrap();
+        assert_eq!(plant, "t,u\n0,5\n");
+
+        // 10 plant messages sampled to at most about 4: every second one, from the first.
+        messages = (0..10).map(|i| ("/plant", json!({"t": i}))).collect();
+        messages.push(("/other", json!({"t": 99})));
+        let rec = recording(&dir, &messages);
+        let kept = sample_topics(&rec, &["/plant", "/servo"], 4).unwrap();
+        let t: Vec<i64> = kept["/plant"]
+            .iter()
+            .map(|m| m["t"].as_i64().unwrap())
+            .collect();
+        assert_eq!(t, [0, 2, 4, 6, 8]);
+        assert_eq!(kept.len(), 1, "only the wanted topics: {kept:?}");
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }
 
