@@ -8,8 +8,10 @@
 //! report adds, with the checks that follow.
 
 mod bad;
-mod cut;
-mod inject;
+#[doc(hidden)]
+pub mod cut;
+#[doc(hidden)]
+pub mod inject;
 mod plan;
 mod report;
 

@@ -223,7 +223,8 @@ pub fn file_pids(path: &Path, prefix: &str) -> Vec<u32> {
 /// A data segment's name without the suffix of a resizable segment (iceoryx2 names those
 /// `<service>_<port>__<n>` and `<service>_<port>__mgmt`: publishers of slices that grow, the
 /// link's tunnel among them), so that it ends in its port's id as the others do.
-fn segment_owner(stem: &str) -> &str {
+#[doc(hidden)]
+pub fn segment_owner(stem: &str) -> &str {
     stem.split_once("__").map_or(stem, |(owner, _)| owner)
 }
 
@@ -394,28 +395,4 @@ fn services_of(prefix: &str, pid: i32) -> Result<Vec<String>> {
     .with_context(|| format!("listing the services of stack '{prefix}'"))?;
     out.sort();
     Ok(out)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// A port id is a `UniqueSystemId` whose bits 64–95 are the creating pid; a resizable
-    /// segment's `__<n>` and `__mgmt` suffixes name the same port as the plain segment.
-    #[test]
-    fn data_segments_name_the_process_of_their_port() {
-        let port: u128 = (4242u128 << 64) | 77;
-        let fp = file_prefix("ut");
-        for suffix in ["", "__0", "__3", "__mgmt"] {
-            let f = PathBuf::from(format!("/dev/shm/{fp}0354a2_{port}{suffix}.data"));
-            assert_eq!(file_pids(&f, "ut"), [4242], "{}", f.display());
-        }
-        let c = PathBuf::from(format!(
-            "/dev/shm/{fp}0354a2_{port}_{}.connection",
-            9u128 << 64
-        ));
-        assert_eq!(file_pids(&c, "ut"), [4242, 9]);
-        assert_eq!(segment_owner("svc_12__mgmt"), "svc_12");
-        assert_eq!(segment_owner("svc_12"), "svc_12");
-    }
 }

@@ -181,7 +181,8 @@ impl RobotTable {
 }
 
 /// An FCI address: a host (an IP address or a name) with an optional `:port` (1 to 65535).
-fn check_address(address: &str) -> Result<()> {
+#[doc(hidden)]
+pub fn check_address(address: &str) -> Result<()> {
     let bad = || {
         anyhow::anyhow!(
             "[robot] address = \"{address}\" is not a host: give the robot's IP address or name, with :port if not 1337"
@@ -212,113 +213,4 @@ fn check_address(address: &str) -> Result<()> {
         return Err(bad());
     }
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn table() -> RobotTable {
-        toml::from_str(
-            r#"
-            kind = "franka"
-            address = "172.16.0.2"
-            [task_frame]
-            origin_m = [0.45, 0.0, 0.2]
-            x_axis = [1.0, 0.0, 0.0]
-            normal = [0.0, 0.0, 1.0]
-            [tool]
-            flange_to_tip = [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0.1034, 1]
-            mass_kg = 0.7
-            "#,
-        )
-        .expect("the table parses")
-    }
-
-    fn refused(edit: impl FnOnce(&mut RobotTable)) -> String {
-        let mut t = table();
-        edit(&mut t);
-        t.check().expect_err("refused").to_string()
-    }
-
-    #[test]
-    fn a_good_table_passes_and_gives_its_plane() {
-        let t = table();
-        t.check().unwrap();
-        let p = t.plane().unwrap();
-        assert_eq!(*p.rotation(), Matrix3::identity());
-        for address in ["172.16.0.2:1337", "fr3.lab", "robot-1", "[::1]:1337", "::1"] {
-            check_address(address).unwrap_or_else(|e| panic!("{address}: {e}"));
-        }
-    }
-
-    type Edit = Box<dyn FnOnce(&mut RobotTable)>;
-
-    #[test]
-    fn each_bad_entry_is_named() {
-        let cases: Vec<(Edit, &str)> = vec![
-            (
-                Box::new(|t| t.kind = "ur5".into()),
-                "the only kind is \"franka\"",
-            ),
-            (
-                Box::new(|t| t.address = "a b".into()),
-                "address = \"a b\" is not a host",
-            ),
-            (Box::new(|t| t.address = "fr3:0".into()), "is not a host"),
-            (
-                Box::new(|t| t.address = "fr3:99999".into()),
-                "is not a host",
-            ),
-            (
-                Box::new(|t| t.task_frame.x_axis = [1.0, 0.1, 0.0]),
-                "x_axis = [1.0, 0.1, 0.0] must be a unit vector",
-            ),
-            (
-                Box::new(|t| t.task_frame.normal = [1.0, 0.0, 0.0]),
-                "at right angles",
-            ),
-            (
-                Box::new(|t| t.task_frame.normal = [0.0, 0.0, f64::NAN]),
-                "normal",
-            ),
-            (
-                Box::new(|t| t.task_frame.tool_mount[2][2] = 1.0),
-                "the tool's mount is not a rotation",
-            ),
-            (
-                Box::new(|t| t.task_frame.origin_m = [1.2, 0.0, 0.2]),
-                "out of its 0.855 m reach",
-            ),
-            (
-                Box::new(|t| t.tool.flange_to_tip[0] = 1.1),
-                "flange_to_tip is not a rigid transform",
-            ),
-            (
-                Box::new(|t| t.tool.flange_to_tip[10] = -1.0),
-                "not a rigid transform",
-            ),
-            (
-                Box::new(|t| t.tool.flange_to_tip[3] = 0.2),
-                "last row is [0.2, 0.0, 0.0, 1.0]",
-            ),
-            (
-                Box::new(|t| t.tool.flange_to_tip[14] = 2.0),
-                "within 0.5 m of the flange",
-            ),
-            (Box::new(|t| t.tool.mass_kg = 4.0), "payload, 3 kg"),
-            (
-                Box::new(|t| t.limits.contact_force_n = 0.0),
-                "contact_force_n = 0",
-            ),
-            (
-                Box::new(|t| t.limits.workspace_m[2] = [0.1, -0.1]),
-                "normal range [0.1, -0.1]",
-            ),
-        ];
-        for (edit, want) in cases {
-            let e = refused(edit);
-            assert!(e.contains(want), "wanted {want:?} in: {e}");
-        }
-    }
 }

@@ -21,7 +21,8 @@
 mod checks;
 mod child;
 mod footprint;
-mod policy;
+#[doc(hidden)]
+pub mod policy;
 mod report;
 mod setup;
 mod status;

@@ -106,6 +106,12 @@ impl Progress {
         }
     }
 
+    /// The plain line as it stands now.
+    #[doc(hidden)]
+    pub fn plain_line(&self) -> String {
+        self.line(&self.state.lock().unwrap_or_else(|e| e.into_inner()))
+    }
+
     /// The plain line: "afs: WHAT: 40/100 runs, 2.1 runs/s, about 28 s left; failed: ...".
     fn line(&self, s: &State) -> String {
         let secs = s.started.elapsed().as_secs_f64();
@@ -153,58 +159,13 @@ fn failures(failed: &BTreeMap<String, u64>) -> String {
 }
 
 /// A duration in words a person reads at a glance: "42 s", "7 min", "1.5 h".
-fn seconds(s: f64) -> String {
+#[doc(hidden)]
+pub fn seconds(s: f64) -> String {
     if s < 90.0 {
         format!("{s:.0} s")
     } else if s < 5400.0 {
         format!("{:.0} min", s / 60.0)
     } else {
         format!("{:.1} h", s / 3600.0)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use afs_shared::check::Check;
-
-    fn check(id: &str, pass: bool) -> Check {
-        Check::at_most(id, id, if pass { 0.5 } else { 2.0 }, 1.0)
-    }
-
-    /// The plain line counts the runs, names each failed check with its count, and estimates
-    /// the time left from the rate; the failures are those of the runs reported.
-    #[test]
-    fn the_plain_line_counts_runs_and_failures_by_check() {
-        let p = Progress::with_bar("fig5.6 over seeds 1..=4", 4, "runs", false);
-        p.run_done(&[check("tangent_error", true), check("peak_force", false)]);
-        p.run_done(&[check("tangent_error", false), check("peak_force", false)]);
-        assert_eq!(p.done(), 2);
-        let line = p.line(&p.state.lock().unwrap());
-        assert!(
-            line.starts_with("afs: fig5.6 over seeds 1..=4: 2/4 runs, "),
-            "{line}"
-        );
-        assert!(line.contains("left"), "{line}");
-        assert!(
-            line.ends_with("failed: peak_force 2, tangent_error 1"),
-            "{line}"
-        );
-        p.run_done(&[check("tangent_error", true)]);
-        p.run_done(&[]);
-        let line = p.line(&p.state.lock().unwrap());
-        assert!(line.contains("4/4 runs") && line.contains("done"), "{line}");
-    }
-
-    /// A run without a failure leaves the tally empty, and the line says so.
-    #[test]
-    fn no_failure_is_said_as_such() {
-        let p = Progress::with_bar("x", 1, "runs", false);
-        p.run_done(&[check("a", true)]);
-        let line = p.line(&p.state.lock().unwrap());
-        assert!(line.ends_with("no check failed"), "{line}");
-        assert_eq!(seconds(42.0), "42 s");
-        assert_eq!(seconds(600.0), "10 min");
-        assert_eq!(seconds(9000.0), "2.5 h");
     }
 }

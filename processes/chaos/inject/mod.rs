@@ -31,7 +31,8 @@ const PROBE_WAIT_S: f64 = 15.0;
 const REQUEST_WAIT: Duration = Duration::from_secs(15);
 /// Time from seeing the servo await the estimate to the kill: the request is copied and sent
 /// within a few ticks (ms).
-const REQUEST_KILL_DELAY: Duration = Duration::from_millis(50);
+#[doc(hidden)]
+pub const REQUEST_KILL_DELAY: Duration = Duration::from_millis(50);
 /// Most wall time to wait for a faulted board to be back.
 const RECOVERY_WAIT: Duration = Duration::from_secs(20);
 /// How often a due probe is asked for again while the servo tracks without starting it (a
@@ -533,6 +534,3 @@ fn up(v: BoardView, now: Instant) -> bool {
         && v.data_since
             .is_some_and(|t| now.saturating_duration_since(t) >= MIN_UPTIME)
 }
-
-#[cfg(test)]
-mod tests;

@@ -310,6 +310,3 @@ fn print_json<R: Serialize>(reports: &[R], json: bool) -> Result<()> {
     }
     Ok(())
 }
-
-#[cfg(test)]
-mod tests;

@@ -1,4 +1,4 @@
-use super::*;
+use afs::tools::experiment::*;
 
 #[test]
 fn seed_ranges_are_inclusive_and_checked() {

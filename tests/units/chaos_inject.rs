@@ -1,8 +1,13 @@
 //! The injector's state machine, stepped with a clock the tests hand it.
 
-use super::*;
-use crate::ipc;
+use afs::chaos::inject::*;
+use afs::ipc;
+use afs_shared::servo::ServoMode;
+
+use afs::chaos::BadSampleSender;
+use afs_shared::faults::{Board, FaultKind, PlannedFault};
 use std::cell::Cell;
+use std::time::{Duration, Instant};
 
 /// The injector's clock in the tests: each step 1 ms after the last, moved on at will.
 struct Clock {
