@@ -142,12 +142,17 @@ fn write_all(file: std::fs::File, rx: Receiver<Rec>, path: PathBuf) -> Result<Re
 pub fn read(path: &Path) -> Result<BTreeMap<String, Vec<serde_json::Value>>> {
     let mut out: BTreeMap<String, Vec<serde_json::Value>> = BTreeMap::new();
     each_message(path, |topic, data| {
-        let v: serde_json::Value = serde_json::from_slice(data)
-            .with_context(|| format!("a message on {topic} is not JSON"))?;
-        out.entry(topic.to_string()).or_default().push(v);
+        out.entry(topic.to_string())
+            .or_default()
+            .push(parse(topic, data)?);
         Ok(())
     })?;
     Ok(out)
+}
+
+/// A message's JSON.
+fn parse(topic: &str, data: &[u8]) -> Result<serde_json::Value> {
+    serde_json::from_slice(data).with_context(|| format!("a message on {topic} is not JSON"))
 }
 
 /// Calls `f` with each message's topic and JSON bytes, in recorded order, holding one message
@@ -252,9 +257,7 @@ pub fn export_csv(recording: &Path, dir: &Path) -> Result<Vec<PathBuf>> {
     let mut files: BTreeMap<String, TopicCsv> = BTreeMap::new();
     let mut flat = Flat::default();
     each_message(recording, |topic, data| {
-        let v: serde_json::Value = serde_json::from_slice(data)
-            .with_context(|| format!("a message on {topic} is not JSON"))?;
-        flat.fill(&v);
+        flat.fill(&parse(topic, data)?);
         if !files.contains_key(topic) {
             let path = dir.join(format!("{}.csv", topic.trim_start_matches('/')));
             let mut writer = csv::Writer::from_path(&path)
@@ -318,9 +321,9 @@ pub fn sample_topics(
         let keep = i.is_multiple_of((n / points).max(1));
         *i += 1;
         if keep {
-            let v: serde_json::Value = serde_json::from_slice(data)
-                .with_context(|| format!("a message on {topic} is not JSON"))?;
-            out.entry(topic.to_string()).or_default().push(v);
+            out.entry(topic.to_string())
+                .or_default()
+                .push(parse(topic, data)?);
         }
         Ok(())
     })?;
