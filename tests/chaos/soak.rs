@@ -4,14 +4,14 @@
 use super::{assert_back_in_time, assert_correct, chaos, chaos_of, faults_of};
 use crate::common::*;
 
-/// 20 random SIGKILLs of servo, sensor and estimator in 24 simulated seconds, the density of
+/// 10 random SIGKILLs of servo, sensor and estimator in 12 simulated seconds, the density of
 /// the long soak below: every fault recovered, the world resumed each time (every tick once,
 /// none lost or reordered, at most one servo sample lost per servo kill), no file of a dead
 /// process left in /dev/shm, the supervisor's heap and the boards' memory flat, and nothing
 /// left at the end.
 #[test]
-fn soak_twenty_random_kills() {
-    soak("soak", 20, 24);
+fn soak_ten_random_kills() {
+    soak("soak", 10, 12);
 }
 
 /// The long soak, a long check outside the test command (docs/testing.md): 50 random kills in
