@@ -134,6 +134,19 @@ fn zenoh_config(cli: &Cli) -> Result<zenoh::Config> {
             "give --listen and/or --connect endpoints (e.g. --listen tcp/127.0.0.1:7447), or --zenoh-config"
         );
     }
+    // This build's zenoh has its TCP transport only (docs/link.md, *Build cost*).
+    for (flag, e) in cli
+        .listen
+        .iter()
+        .map(|e| ("--listen", e))
+        .chain(cli.connect.iter().map(|e| ("--connect", e)))
+    {
+        if !e.starts_with("tcp/") {
+            bail!(
+                "{flag} {e}: afs's link speaks zenoh over TCP only; give a tcp/HOST:PORT endpoint (docs/link.md, *Build cost*)"
+            );
+        }
+    }
     let list = |v: &[String]| {
         v.iter()
             .map(|e| serde_json::to_string(e).unwrap_or_default())

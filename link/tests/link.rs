@@ -193,6 +193,12 @@ fn the_link_board_and_afs_record_refuse_bad_input() {
         .output()
         .unwrap();
     assert_refused(&out, &"poll 0", "--poll-ms");
+    let out = Command::new(&link)
+        .args(["--prefix", "lkbad", "--side", "remote"])
+        .args(["--listen", "quic/127.0.0.1:7999"])
+        .output()
+        .unwrap();
+    assert_refused(&out, &"a QUIC endpoint", "over TCP only");
     let out = afs()
         .args(["record", "--prefix", "lknone", "--out", "/tmp/lknone.mcap"])
         .output()
