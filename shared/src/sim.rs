@@ -140,9 +140,13 @@ impl Lockstep {
         let Some(req) = self.servo.pending_probe() else {
             return;
         };
-        let params = self.servo.params().tangent;
-        let outcome =
-            tangent::estimate(req.samples, req.plan, req.base_angle, &params, req.reprobe);
+        let outcome = tangent::estimate(
+            req.samples,
+            req.plan,
+            req.base_angle,
+            &req.params,
+            req.reprobe,
+        );
         let log = EstimateLog {
             time_s: self.time(),
             base_angle_rad: req.base_angle,

@@ -46,9 +46,61 @@ fn estimate(servo: &ServoCore) -> TangentOutcome {
         req.samples,
         req.plan,
         req.base_angle,
-        &servo.params().tangent,
+        &req.params,
         req.reprobe,
     )
+}
+
+/// On a contact a tenth of the design stiffness (1 kN/m), an estimate asked for is re-probed
+/// with a longer stroke about the corrected tangent and answers within 0.05°; a re-estimate the
+/// tracker started itself (here a slope trigger, as a restored state says) is sent without the
+/// soft-contact re-probe.
+#[test]
+fn a_soft_contact_is_reprobed_when_the_estimate_was_asked_for() {
+    let mut cfg = SimConfig {
+        tangent_error_rad: 3f64.to_radians(),
+        ..SimConfig::default()
+    };
+    cfg.plant.contact.interaction_stiffness_n_per_m = 1e3;
+    let mut sim = Lockstep::new(&cfg).unwrap();
+    sim.set_auto_estimate(false);
+    // The friction-suppression dither at 50 mm/s, as `afs experiment tangent` runs it.
+    sim.servo_mut().set_a_omega(0.05);
+    sim.run(3000);
+    sim.servo_mut().request_tangent_estimate();
+    until(&mut sim, ServoMode::AwaitingEstimate, 240_000);
+    let configured = sim.servo().params().tangent;
+    assert_eq!(sim.servo().pending_probe().unwrap().params, configured);
+    let outcome = estimate(sim.servo());
+    let TangentOutcome::Reprobe {
+        reason: ReprobeReason::SoftContact,
+        plan,
+    } = outcome
+    else {
+        panic!("{outcome:?}")
+    };
+    assert!(plan.amplitude_m >= 1.5 * configured.amplitude_m, "{plan:?}");
+    sim.servo_mut().apply_tangent_outcome(&outcome);
+    until(&mut sim, ServoMode::AwaitingEstimate, 240_000);
+    let TangentOutcome::Estimate(e) = estimate(sim.servo()) else {
+        panic!("no estimate after the soft re-probe")
+    };
+    let truth = sim.truth().tangent_angle_rad;
+    let error = (e.tangent_angle_rad - truth).to_degrees();
+    assert!(error.abs() < 0.05, "{error}° off");
+    // The same servo, as if its last estimation had been a slope trigger's.
+    let mut state = sim.servo().state();
+    state.last_trigger = u32::from(Trigger::Slope);
+    sim.servo_mut().restore(&state).unwrap();
+    let p = sim.servo().estimation_params();
+    assert_eq!(p.design_stiffness_n_per_m, 0.0);
+    assert_eq!(
+        afs_shared::tangent::TangentParams {
+            design_stiffness_n_per_m: configured.design_stiffness_n_per_m,
+            ..p
+        },
+        configured
+    );
 }
 
 /// The whole cycle: a request stops the servo (velocity target 0 at once), it probes once

@@ -203,7 +203,7 @@ impl EstimatorLink {
                 let len = req.samples.len().min(ipc::MAX_PROBE_SAMPLES);
                 match self.loan(len) {
                     Some(mut loan) => {
-                        let tangent = servo.params().tangent;
+                        let tangent = req.params;
                         *loan.header_mut() = TangentRequestHeader {
                             version: TangentRequestHeader::VERSION,
                             reprobe: u32::from(req.reprobe),

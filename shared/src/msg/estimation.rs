@@ -41,6 +41,8 @@ wire_struct! {
         pub contact_loss_fraction: f64,
         /// [`TangentParams::noise_std_n`].
         pub noise_std_n: f64,
+        /// [`TangentParams::design_stiffness_n_per_m`].
+        pub design_stiffness_n_per_m: f64,
     }
 }
 
@@ -60,6 +62,7 @@ impl From<&TangentParams> for TangentParamsMsg {
             max_std_error_deg: p.max_std_error_deg,
             contact_loss_fraction: p.contact_loss_fraction,
             noise_std_n: p.noise_std_n,
+            design_stiffness_n_per_m: p.design_stiffness_n_per_m,
         }
     }
 }
@@ -80,6 +83,7 @@ impl TangentParamsMsg {
             max_std_error_deg: self.max_std_error_deg,
             contact_loss_fraction: self.contact_loss_fraction,
             noise_std_n: self.noise_std_n,
+            design_stiffness_n_per_m: self.design_stiffness_n_per_m,
         };
         p.validate()?;
         Ok(p)
@@ -155,10 +159,10 @@ impl ProbePlanMsg {
 }
 
 wire_message! {
-    version = 1;
+    version = 2;
     /// Header of a tangent-estimation request; the payload is the `[ProbeSample]` record.
     #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend, Serialize)]
-    #[type_name("afs::TangentRequestHeader")]
+    #[type_name("afs::TangentRequestHeader.v2")]
     pub struct TangentRequestHeader {
         /// The layout version, `Self::VERSION` (docs/messages.md).
         pub version: u32,
@@ -208,6 +212,8 @@ wire_code! {
         EqualResponses = 2,
         /// Ambiguous (re-probe or unresolved).
         Ambiguous = 3,
+        /// A soft contact: the re-probe's stroke is longer.
+        SoftContact = 4,
         /// Contact lost during a probe.
         ContactLost = 10,
         /// Too few samples in a probe.
@@ -290,6 +296,7 @@ impl From<ReprobeReason> for ResponseCode {
             ReprobeReason::Fold => ResponseCode::Fold,
             ReprobeReason::EqualResponses => ResponseCode::EqualResponses,
             ReprobeReason::Ambiguous => ResponseCode::Ambiguous,
+            ReprobeReason::SoftContact => ResponseCode::SoftContact,
         }
     }
 }
@@ -301,6 +308,7 @@ impl ResponseCode {
             ResponseCode::Fold => Some(ReprobeReason::Fold),
             ResponseCode::EqualResponses => Some(ReprobeReason::EqualResponses),
             ResponseCode::Ambiguous => Some(ReprobeReason::Ambiguous),
+            ResponseCode::SoftContact => Some(ReprobeReason::SoftContact),
             _ => None,
         }
     }

@@ -35,6 +35,9 @@ pub enum ReprobeReason {
     EqualResponses,
     /// No probe's sign is significant and the hypotheses disagree.
     Ambiguous,
+    /// The contact is softer than the stroke was sized for: the re-probe runs a longer stroke
+    /// ([`TangentParams::soft_contact_stroke`]).
+    SoftContact,
 }
 
 /// Why an estimate cannot be trusted.
@@ -276,6 +279,21 @@ pub(super) fn regression_estimate(
     let Some((alpha, stiffness, resid, se)) = fit else {
         return TangentOutcome::Failed(TangentError::Unresolved(ReprobeReason::Ambiguous));
     };
+    // A soft contact: the response is small against the noise whatever the answer, so the
+    // re-probe (both sides, wider) runs a stroke scaled to the stiffness just measured.
+    let preload = if hold_mean.is_finite() {
+        hold_mean
+    } else {
+        stats[0].normal_mean_n
+    };
+    let response = commanded_stiffness(&stats[..count], plan.amplitude_m, alpha);
+    let soft = params.soft_contact_stroke(stiffness, response, preload, 3.0 * se);
+    if let (false, Some(stroke)) = (reprobed, soft) {
+        return TangentOutcome::Reprobe {
+            reason: ReprobeReason::SoftContact,
+            plan: params.soft_contact_plan(stroke, alpha),
+        };
+    }
     // The thesis's two-probe form: would it fold, or is it ill-conditioned? Judged on the
     // corrected normal: on the uncorrected one the tangential (friction) force leaking into
     // the projection can flip a small response's sign.
@@ -343,6 +361,19 @@ pub(super) fn signal_and_noise(stats: &[ProbeStats]) -> (f64, f64) {
     stats.iter().fold((0.0f64, 0.0f64), |(a, b), s| {
         (a.max(s.r_signed_n.abs()), b.max(s.r_std_n))
     })
+}
+
+/// The normal force's in-phase response per metre of the commanded stroke's part along the
+/// normal, `k_c` in `f_i = −k_c A sin(δα_i + α0)` by least squares over the probes (N/m): the
+/// contact in series with the servo and less what the force loop takes out at the stroke's
+/// frequency. It is what a stroke's force response scales with; 0 where no stroke has a part
+/// along the normal.
+fn commanded_stiffness(stats: &[ProbeStats], amplitude_m: f64, alpha0: f64) -> f64 {
+    let (num, den) = stats.iter().fold((0.0, 0.0), |(n, d), s| {
+        let normal = amplitude_m * (s.offset_rad + alpha0).sin();
+        (n - s.force_in_phase_n * normal, d + normal * normal)
+    });
+    if den > 0.0 { num / den } else { 0.0 }
 }
 
 /// The first probe whose in-phase travel along t̂ is below [`MIN_TRAVEL_FRACTION`] of the

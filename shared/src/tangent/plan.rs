@@ -37,7 +37,28 @@ pub struct TangentParams {
     pub contact_loss_fraction: f64,
     /// Configured sensor noise standard deviation (N), used when the hold gives no estimate.
     pub noise_std_n: f64,
+    /// The contact stiffness the stroke is sized for (N/m): the thesis's 10 kN/m, on which the
+    /// 1-mm stroke gives a normal-force response well above the sensor's noise. A first probe
+    /// set whose regression finds a contact softer than [`SOFT_CONTACT_FRACTION`] of it is run
+    /// again with the stroke scaled up ([`TangentParams::soft_contact_stroke`]); 0 never does.
+    pub design_stiffness_n_per_m: f64,
 }
+
+/// A contact softer than this fraction of [`TangentParams::design_stiffness_n_per_m`] is
+/// re-probed with a longer stroke.
+pub const SOFT_CONTACT_FRACTION: f64 = 0.5;
+
+/// The soft-contact re-probe's inner angle off the corrected tangent (deg); the outer one is
+/// twice it.
+pub const SOFT_CONTACT_ANGLE_DEG: f64 = 2.0;
+
+/// The longest stroke a soft-contact re-probe runs (m): ten times the default.
+pub const SOFT_CONTACT_MAX_STROKE_M: f64 = 0.01;
+
+/// The share of the hold's normal force a soft-contact re-probe's normal swing may take
+/// at its widest probe: half of what tracking tolerates (`afs experiment fig5.6` checks the
+/// dither-period mean of the normal force within 0.2 of the preload).
+pub const SOFT_CONTACT_MARGIN: f64 = 0.05;
 
 impl Default for TangentParams {
     fn default() -> Self {
@@ -54,6 +75,7 @@ impl Default for TangentParams {
             max_std_error_deg: 0.5,
             contact_loss_fraction: 0.1,
             noise_std_n: 0.02,
+            design_stiffness_n_per_m: 1e4,
         }
     }
 }
@@ -109,6 +131,7 @@ impl TangentParams {
             ("equal_threshold", self.equal_threshold),
             ("max_std_error_deg", self.max_std_error_deg),
             ("noise_std_n", self.noise_std_n),
+            ("design_stiffness_n_per_m", self.design_stiffness_n_per_m),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(ConfigError::setting(
@@ -162,6 +185,62 @@ impl TangentParams {
             .fold(0.0f64, |m, a| m.max(a.abs()));
         let s = (widest.to_radians() + uncertainty_rad).sin().max(1e-6);
         margin * preload_n / (stiffness_n_per_m * s)
+    }
+
+    /// The stroke of a re-probe on a soft contact (m), or None where the contact is not soft or
+    /// a longer stroke would gain little.
+    ///
+    /// The regression's error goes as the force noise over `k_e A` (the tip's travel along the
+    /// surface times the contact's stiffness, `stiffness_n_per_m`), so on a contact softer than
+    /// the design stiffness the stroke `A · k_design / k_e` would give the design's accuracy.
+    /// What the stroke costs is the normal force's swing, `k_c A sin(δα + α0)`, with `k_c`
+    /// (`response_n_per_m`) the in-phase normal force per metre of the commanded stroke's
+    /// normal part: the contact in series with the servo, less what the force loop takes out at
+    /// the stroke's frequency. The soft re-probe runs about the corrected tangent
+    /// ([`TangentParams::soft_contact_plan`]), at ±[`SOFT_CONTACT_ANGLE_DEG`] and twice that,
+    /// so its widest angle off the truth is 2 × that plus `uncertainty_rad`; the swing there is
+    /// held to [`SOFT_CONTACT_MARGIN`] × the hold's `preload_n`, and the stroke to
+    /// [`SOFT_CONTACT_MAX_STROKE_M`]. Less than 1.5× the configured stroke is not worth a
+    /// second probe set.
+    pub fn soft_contact_stroke(
+        &self,
+        stiffness_n_per_m: f64,
+        response_n_per_m: f64,
+        preload_n: f64,
+        uncertainty_rad: f64,
+    ) -> Option<f64> {
+        let design = self.design_stiffness_n_per_m;
+        let soft = stiffness_n_per_m.is_finite()
+            && stiffness_n_per_m > 0.0
+            && stiffness_n_per_m < SOFT_CONTACT_FRACTION * design;
+        let numbers = response_n_per_m.is_finite()
+            && response_n_per_m > 0.0
+            && preload_n.is_finite()
+            && preload_n > 0.0
+            && uncertainty_rad.is_finite()
+            && uncertainty_rad >= 0.0;
+        if !(soft && numbers) {
+            return None;
+        }
+        let widest = (2.0 * SOFT_CONTACT_ANGLE_DEG.to_radians() + uncertainty_rad).sin();
+        let bound = SOFT_CONTACT_MARGIN * preload_n / (response_n_per_m * widest);
+        let stroke = (self.amplitude_m * design / stiffness_n_per_m)
+            .min(bound)
+            .min(SOFT_CONTACT_MAX_STROKE_M);
+        (stroke >= 1.5 * self.amplitude_m).then_some(stroke)
+    }
+
+    /// The soft-contact re-probe set (see [`TangentParams::soft_contact_stroke`]): four probes
+    /// at ±[`SOFT_CONTACT_ANGLE_DEG`] and ±twice that off the corrected tangent, the estimated
+    /// tangent less the first set's `alpha0_rad` (offsets `±a − α0`), with the stroke
+    /// `stroke_m`. Close to the tangent the stroke travels along the surface, which is what
+    /// the regression's accuracy needs, and barely into it, which is what the swing costs; the
+    /// probes on both sides keep the stiffness (the regression's other unknown) determined.
+    pub fn soft_contact_plan(&self, stroke_m: f64, alpha0_rad: f64) -> ProbePlan {
+        let a = SOFT_CONTACT_ANGLE_DEG.to_radians();
+        let mut plan = ProbePlan::new(&[-2.0 * a, -a, a, 2.0 * a].map(|o| o - alpha0_rad), self);
+        plan.amplitude_m = stroke_m;
+        plan
     }
 }
 
