@@ -5,6 +5,7 @@
 //! and a point load at the flange adds `m J_vᵀ J_v` to the mass matrix and `−m J_vᵀ g` to the
 //! gravity. (tests/fci_wire.rs compares the same model with libfranka's.)
 
+use afs_shared::task_plane::{TaskPlane, planar_gains};
 use franka::model::{Frame, Model};
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
@@ -186,17 +187,28 @@ fn a_load_at_the_flange_adds_its_closed_forms() {
 const READY: [f64; 7] = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785];
 const THETA_TARGET: f64 = 0.2;
 
+/// The planar gains of a loop: stiffness and damping along x, y and about the normal, from the
+/// plane, the Jacobian and the mass matrix at the current pose.
+type Gains = dyn Fn(&TaskPlane, &J6, &M7) -> (Vector3<f64>, Vector3<f64>);
+
+/// Fixed gains: 600 N/m and 50 N·s/m in the plane, θ's as given.
+fn fixed(theta: (f64, f64)) -> impl Fn(&TaskPlane, &J6, &M7) -> (Vector3<f64>, Vector3<f64>) {
+    move |_, _, _| {
+        (
+            Vector3::new(600.0, 600.0, theta.0),
+            Vector3::new(50.0, 50.0, theta.1),
+        )
+    }
+}
+
 /// The task-plane torque law (`afs_shared::task_plane`, docs/franka.md) closed on this model
 /// for `cycles` at 1 kHz, from the ready pose, gravity compensated as the robot does,
 /// `M q̈ = τ − c`: a planar PD (standing in for the thesis's controller; θ's stiffness and
 /// damping given) toward 3 cm, −2 cm and 0.2 rad, the hold on height, tilt and the null
 /// space, every command through the FR3's limits. Returns the last state and the largest θ
 /// error after the first 0.1 s.
-fn close_the_loop(
-    theta_gains: (f64, f64),
-    cycles: usize,
-) -> (afs_shared::task_plane::PlanarState, f64) {
-    use afs_shared::task_plane::{Hold, TaskPlane, TorqueLimits, joint_torques, limit_torques};
+fn close_the_loop(gains: &Gains, cycles: usize) -> (afs_shared::task_plane::PlanarState, f64) {
+    use afs_shared::task_plane::{Hold, TorqueLimits, joint_torques, limit_torques};
     use nalgebra::Vector2;
     let m = model();
     let ready = Q::from(READY);
@@ -219,11 +231,12 @@ fn close_the_loop(
         let (r, p) = flange_pose(&m, &q);
         let j = jacobian(&m, &q);
         let s = plane.planar(&r, &p, &j, &dq);
-        let force = (target - s.position_m) * 600.0 - s.velocity_m_per_s * 50.0;
-        let moment =
-            (THETA_TARGET - s.theta_rad) * theta_gains.0 - s.theta_rate_rad_per_s * theta_gains.1;
-        let w = plane.wrench(&s, force, moment, 0.0, &hold);
         let mass = mass(&m, &q, 0.0);
+        let (kp, kd) = gains(&plane, &j, &mass);
+        let force = (target - s.position_m).component_mul(&kp.xy())
+            - s.velocity_m_per_s.component_mul(&kd.xy());
+        let moment = (THETA_TARGET - s.theta_rad) * kp.z - s.theta_rate_rad_per_s * kd.z;
+        let w = plane.wrench(&s, force, moment, 0.0, &hold);
         let c = coriolis(&m, &q, &dq);
         let (tau, full) = joint_torques(&j, &mass, &c, &q, &dq, &ready, &w, &hold);
         if !full {
@@ -246,7 +259,7 @@ fn close_the_loop(
 /// hold keeps its height and tilt.
 #[test]
 fn the_task_plane_law_moves_the_fr3_in_its_plane_and_holds_the_rest() {
-    let (s, _) = close_the_loop((2.0, 0.1), 3000);
+    let (s, _) = close_the_loop(&fixed((2.0, 0.1)), 3000);
     assert!(
         (s.position_m - nalgebra::Vector2::new(0.03, -0.02)).amax() < 1e-3,
         "{s:?}"
@@ -274,6 +287,56 @@ fn the_theta_damping_is_bounded_by_the_flanges_inertia() {
     assert!((lambda_tt - 1.19e-4).abs() < 0.01e-4, "{lambda_tt:e}");
     let bound = 2.0 * lambda_tt / 1e-3;
     assert!(0.1 < bound && bound < 1.0, "{bound}");
-    let (_, worst) = close_the_loop((15.0, 1.0), 500);
+    let (_, worst) = close_the_loop(&fixed((15.0, 1.0)), 500);
+    assert!(worst > 0.2, "θ's largest error {worst} rad");
+}
+
+/// A point load at the flange adds its mass to the planar inertia along x and y and nothing
+/// about the normal: `Λ' = Λ + diag(m I₃, 0)` (push-through: `(Λ⁻¹ − Λ⁻¹ (D⁻¹ + Λ⁻¹)⁻¹ Λ⁻¹)⁻¹
+/// = Λ + D` for `M' = M + Jᵀ D J`), so the planar gains grow with the tool.
+#[test]
+fn a_flange_load_adds_its_mass_to_the_planar_inertia() {
+    let m = model();
+    let ready = Q::from(READY);
+    let (r0, p0) = flange_pose(&m, &ready);
+    let plane = TaskPlane::new(Matrix3::identity(), p0, r0).expect("rotations");
+    let j = jacobian(&m, &ready);
+    let bare = plane.planar_inertia(&j, &mass(&m, &ready, 0.0)).unwrap();
+    let loaded = plane.planar_inertia(&j, &mass(&m, &ready, 2.0)).unwrap();
+    assert!(
+        (loaded.x - bare.x - 2.0).abs() < 1e-6,
+        "{bare:?} {loaded:?}"
+    );
+    assert!(
+        (loaded.y - bare.y - 2.0).abs() < 1e-6,
+        "{bare:?} {loaded:?}"
+    );
+    assert!((loaded.z - bare.z).abs() < 1e-9, "{bare:?} {loaded:?}");
+    assert!((bare.z - 1.19e-4).abs() < 0.01e-4, "{bare:?}");
+}
+
+/// θ's gains from the flange's inertia ([`planar_gains`], recomputed every cycle): asked for
+/// 300 Hz, they are held to the sampling's limit (`d Δt / Λ_θθ` = 0.5, about 40 Hz at 1 kHz)
+/// and the loop takes θ to its target; the same gains computed as if sampled a thousand times
+/// faster (`d Δt / Λ_θθ` ≈ 3.8 at the real 1 kHz) swing θ far off, as 1 N·m·s/rad did above.
+#[test]
+fn theta_gains_from_the_inertia_hold_the_sampling_limit() {
+    let theta_from = |dt: f64| {
+        move |plane: &TaskPlane, j: &J6, m: &M7| {
+            // A pose the diverging loop flings to a singularity gets no θ gains.
+            let (k, d) = plane
+                .planar_inertia(j, m)
+                .and_then(|inertia| planar_gains(&inertia, 300.0, 1.0, dt))
+                .map_or((0.0, 0.0), |g| (g.stiffness.z, g.damping.z));
+            (Vector3::new(600.0, 600.0, k), Vector3::new(50.0, 50.0, d))
+        }
+    };
+    let (s, _) = close_the_loop(&theta_from(1e-3), 3000);
+    assert!((s.theta_rad - THETA_TARGET).abs() < 5e-3, "{s:?}");
+    assert!(
+        (s.position_m - nalgebra::Vector2::new(0.03, -0.02)).amax() < 1e-3,
+        "{s:?}"
+    );
+    let (_, worst) = close_the_loop(&theta_from(1e-6), 500);
     assert!(worst > 0.2, "θ's largest error {worst} rad");
 }

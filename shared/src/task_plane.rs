@@ -204,6 +204,71 @@ impl TaskPlane {
     }
 }
 
+/// The largest `d Δt / Λ` the planar gains give (a damper `d` on an inertia `Λ`, sampled every
+/// `Δt`): the discrete pole `1 − d Δt / Λ` stays inside the unit circle while it is below 2
+/// (docs/franka.md, *The planar gains*); a quarter of that leaves the pole at 0.5.
+pub const DISCRETE_DAMPING_LIMIT: f64 = 0.5;
+
+/// Stiffness and damping of the planar axes: x and y (N/m, N·s/m), θ (N·m/rad, N·m·s/rad).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlanarGains {
+    /// Stiffness along x, y and about the normal.
+    pub stiffness: Vector3<f64>,
+    /// Damping along x, y and about the normal.
+    pub damping: Vector3<f64>,
+    /// The natural frequency the axes got (rad/s): the one asked for, or the sampling's limit.
+    pub natural_frequency_rad_per_s: f64,
+}
+
+impl TaskPlane {
+    /// The inertia the tool shows along the plane's x and y (kg) and about its normal (kg·m²):
+    /// the diagonal of the task-space inertia `Λ = (J_P M⁻¹ J_Pᵀ)⁻¹`, with `J_P` the Jacobian's
+    /// rows turned into the plane's frame (`R_Pᵀ` on the linear and the angular rows). `None`
+    /// where M or `J M⁻¹ Jᵀ` is not positive definite (a singular arm).
+    #[must_use]
+    pub fn planar_inertia(&self, jacobian: &Jacobian, mass: &MassMatrix) -> Option<Vector3<f64>> {
+        let m = mass.cholesky()?;
+        let rt = self.rotation.transpose();
+        let mut jp = *jacobian;
+        let linear = rt * jacobian.fixed_rows::<3>(0);
+        let angular = rt * jacobian.fixed_rows::<3>(3);
+        jp.fixed_rows_mut::<3>(0).copy_from(&linear);
+        jp.fixed_rows_mut::<3>(3).copy_from(&angular);
+        let lambda = (jp * m.solve(&jp.transpose())).cholesky()?.inverse();
+        Some(Vector3::new(lambda[(0, 0)], lambda[(1, 1)], lambda[(5, 5)]))
+    }
+}
+
+/// The planar gains for the axes' inertias `inertia` (x, y in kg, θ in kg·m²,
+/// [`TaskPlane::planar_inertia`]): each axis a mass-spring-damper of natural frequency
+/// `ω = 2π bandwidth_hz` and damping ratio `damping_ratio`, `k = Λ ω²`, `d = 2 ζ Λ ω`, with ω
+/// held to `DISCRETE_DAMPING_LIMIT / (2 ζ Δt)` so that `d Δt / Λ` stays at or below
+/// [`DISCRETE_DAMPING_LIMIT`] for a controller sampled every `dt_s`. `None` unless every
+/// input is finite and positive.
+#[must_use]
+pub fn planar_gains(
+    inertia: &Vector3<f64>,
+    bandwidth_hz: f64,
+    damping_ratio: f64,
+    dt_s: f64,
+) -> Option<PlanarGains> {
+    let positive = |v: f64| v.is_finite() && v > 0.0;
+    if !(inertia.iter().all(|&v| positive(v))
+        && positive(bandwidth_hz)
+        && positive(damping_ratio)
+        && positive(dt_s))
+    {
+        return None;
+    }
+    let omega = (std::f64::consts::TAU * bandwidth_hz)
+        .min(DISCRETE_DAMPING_LIMIT / (2.0 * damping_ratio * dt_s));
+    Some(PlanarGains {
+        stiffness: inertia * (omega * omega),
+        damping: inertia * (2.0 * damping_ratio * omega),
+        natural_frequency_rad_per_s: omega,
+    })
+}
+
 /// The rotation vector (axis × angle, rad) of rotation `r`: the angle as
 /// `atan2(|a|, (tr r − 1)/2)`, `a` the axial vector of `(r − rᵀ)/2` (`sin φ` times the axis).
 /// nalgebra's `scaled_axis` takes the angle from the trace alone (an arccosine), which keeps

@@ -1,5 +1,5 @@
 use super::*;
-use nalgebra::{Matrix3, Rotation3, Vector2, Vector3};
+use nalgebra::{Matrix3, Rotation3, SMatrix, Vector2, Vector3};
 use rand_chacha::ChaCha8Rng;
 use rand_chacha::rand_core::SeedableRng;
 use rand_distr::{Distribution, Uniform};
@@ -289,4 +289,66 @@ fn a_frame_that_is_not_a_rotation_is_refused_by_name() {
         TaskPlane::new(nan, Vector3::zeros(), good),
         Err(FrameError::NotFinite { .. })
     ));
+}
+
+/// The planar gains' closed forms: `k = Λ ω²`, `d = 2 ζ Λ ω`; a bandwidth past the sampling's
+/// limit is held there, with `d Δt / Λ` exactly the limit; bad inputs get none.
+#[test]
+fn the_planar_gains_are_the_inertias_mass_spring_damper() {
+    let inertia = Vector3::new(2.0, 3.0, 1.2e-4);
+    let (zeta, dt) = (0.7, 1e-3);
+    let g = planar_gains(&inertia, 5.0, zeta, dt).unwrap();
+    let w = std::f64::consts::TAU * 5.0;
+    assert_eq!(g.natural_frequency_rad_per_s, w);
+    for i in 0..3 {
+        assert!((g.stiffness[i] - inertia[i] * w * w).abs() <= 1e-12 * g.stiffness[i]);
+        assert!((g.damping[i] - 2.0 * zeta * inertia[i] * w).abs() <= 1e-12 * g.damping[i]);
+    }
+    let fast = planar_gains(&inertia, 100.0, zeta, dt).unwrap();
+    let cap = DISCRETE_DAMPING_LIMIT / (2.0 * zeta * dt);
+    assert!(cap < std::f64::consts::TAU * 100.0);
+    assert_eq!(fast.natural_frequency_rad_per_s, cap);
+    for i in 0..3 {
+        let pole = fast.damping[i] * dt / inertia[i];
+        assert!((pole - DISCRETE_DAMPING_LIMIT).abs() < 1e-12, "{pole}");
+    }
+    let bad = [
+        (Vector3::new(0.0, 3.0, 1e-4), 5.0, zeta, dt),
+        (Vector3::new(2.0, f64::NAN, 1e-4), 5.0, zeta, dt),
+        (inertia, 0.0, zeta, dt),
+        (inertia, 5.0, -1.0, dt),
+        (inertia, 5.0, zeta, f64::INFINITY),
+    ];
+    for (i, f, z, t) in bad {
+        assert_eq!(planar_gains(&i, f, z, t), None, "{i:?} {f} {z} {t}");
+    }
+}
+
+/// The planar inertia is the diagonal of `Λ = (J M⁻¹ Jᵀ)⁻¹` with the Jacobian's rows in the
+/// plane's frame: on random arms, the same as `blockdiag(R_Pᵀ) Λ blockdiag(R_P)` by inversion;
+/// a zero row (a singular arm) gives none.
+#[test]
+fn the_planar_inertia_is_the_task_inertia_in_the_planes_frame() {
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let p = plane();
+    let r = *p.rotation();
+    let mut r6 = SMatrix::<f64, 6, 6>::zeros();
+    r6.fixed_view_mut::<3, 3>(0, 0).copy_from(&r);
+    r6.fixed_view_mut::<3, 3>(3, 3).copy_from(&r);
+    for _ in 0..20 {
+        let j = random_jacobian(&mut rng);
+        let m = random_mass(&mut rng);
+        let lambda = (j * m.try_inverse().unwrap() * j.transpose())
+            .try_inverse()
+            .unwrap();
+        let want = r6.transpose() * lambda * r6;
+        let got = p.planar_inertia(&j, &m).unwrap();
+        for (k, idx) in [0, 1, 5].into_iter().enumerate() {
+            let w = want[(idx, idx)];
+            assert!((got[k] - w).abs() <= 1e-9 * w.abs(), "{got:?} vs {w}");
+        }
+    }
+    let mut j = random_jacobian(&mut rng);
+    j.row_mut(5).fill(0.0);
+    assert_eq!(p.planar_inertia(&j, &random_mass(&mut rng)), None);
 }
