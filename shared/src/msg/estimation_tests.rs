@@ -39,6 +39,10 @@ fn tangent_outcomes_round_trip() {
             reason: ReprobeReason::Fold,
             plan: params.reprobe_plan(),
         },
+        TangentOutcome::Reprobe {
+            reason: ReprobeReason::SoftContact,
+            plan: params.soft_contact_plan(3e-3, 0.02),
+        },
         TangentOutcome::Failed(TangentError::ContactLost {
             probe: 1,
             min_n: 0.1,
@@ -75,10 +79,16 @@ fn tangent_outcomes_round_trip() {
 /// Settings and plans survive the wire; a malformed one is refused.
 #[test]
 fn params_and_plans_round_trip() {
-    let p = TangentParams::default();
+    let p = TangentParams {
+        design_stiffness_n_per_m: 2.5e3,
+        ..TangentParams::default()
+    };
     assert_eq!(TangentParamsMsg::from(&p).to_params(), Ok(p));
     let mut bad = TangentParamsMsg::from(&p);
     bad.amplitude_m = f64::NAN;
+    assert!(bad.to_params().is_err());
+    let mut bad = TangentParamsMsg::from(&p);
+    bad.design_stiffness_n_per_m = -1.0;
     assert!(bad.to_params().is_err());
     let plan = p.first_plan();
     assert_eq!(ProbePlanMsg::from(&plan).to_plan(), Some(plan));
