@@ -280,7 +280,8 @@ pub(super) fn regression_estimate(
         return TangentOutcome::Failed(TangentError::Unresolved(ReprobeReason::Ambiguous));
     };
     // A soft contact: the response is small against the noise whatever the answer, so the
-    // re-probe (both sides, wider) runs a stroke scaled to the stiffness just measured.
+    // re-probe (four probes close to the corrected tangent, on both sides) runs a stroke
+    // scaled to the stiffness just measured and bounded by the swing it costs.
     let preload = if hold_mean.is_finite() {
         hold_mean
     } else {
