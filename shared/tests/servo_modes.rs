@@ -87,6 +87,11 @@ fn a_soft_contact_is_reprobed_when_the_estimate_was_asked_for() {
     };
     let truth = sim.truth().tangent_angle_rad;
     let error = (e.tangent_angle_rad - truth).to_degrees();
+    eprintln!(
+        "soft re-probe: stroke {:.2} mm, k_e read {:.0} N/m, error {error:.4}°",
+        plan.amplitude_m * 1e3,
+        e.stiffness_n_per_m
+    );
     assert!(error.abs() < 0.05, "{error}° off");
     // The same servo, as if its last estimation had been a slope trigger's.
     let mut state = sim.servo().state();

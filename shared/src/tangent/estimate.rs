@@ -279,21 +279,15 @@ pub(super) fn regression_estimate(
     let Some((alpha, stiffness, resid, se)) = fit else {
         return TangentOutcome::Failed(TangentError::Unresolved(ReprobeReason::Ambiguous));
     };
-    // A soft contact: the response is small against the noise whatever the answer, so the
-    // re-probe (four probes close to the corrected tangent, on both sides) runs a stroke
-    // scaled to the stiffness just measured and bounded by the swing it costs.
-    let preload = if hold_mean.is_finite() {
-        hold_mean
-    } else {
-        stats[0].normal_mean_n
-    };
-    let response = commanded_stiffness(&stats[..count], plan.amplitude_m, alpha);
-    let soft = params.soft_contact_stroke(stiffness, response, preload, 3.0 * se);
-    if let (false, Some(stroke)) = (reprobed, soft) {
-        return TangentOutcome::Reprobe {
-            reason: ReprobeReason::SoftContact,
-            plan: params.soft_contact_plan(stroke, alpha),
+    if !reprobed {
+        let preload = if hold_mean.is_finite() {
+            hold_mean
+        } else {
+            stats[0].normal_mean_n
         };
+        if let Some(again) = soft_contact_reprobe(&stats[..count], plan, params, preload, fit) {
+            return again;
+        }
     }
     // The thesis's two-probe form: would it fold, or is it ill-conditioned? Judged on the
     // corrected normal: on the uncorrected one the tangential (friction) force leaking into
@@ -361,6 +355,26 @@ pub(super) fn regression_estimate(
 pub(super) fn signal_and_noise(stats: &[ProbeStats]) -> (f64, f64) {
     stats.iter().fold((0.0f64, 0.0f64), |(a, b), s| {
         (a.max(s.r_signed_n.abs()), b.max(s.r_std_n))
+    })
+}
+
+/// A first set on a soft contact: the response is small against the noise whatever the answer,
+/// so a re-probe (four probes close to the corrected tangent, on both sides) runs a stroke
+/// scaled to the stiffness the regression `fit` (α0, k_e, residual, standard error) just read,
+/// bounded by the swing it costs at the hold's `preload_n`; None where the contact is not soft.
+fn soft_contact_reprobe(
+    stats: &[ProbeStats],
+    plan: &ProbePlan,
+    params: &TangentParams,
+    preload_n: f64,
+    fit: Option<(f64, f64, f64, f64)>,
+) -> Option<TangentOutcome> {
+    let (alpha, stiffness, _, se) = fit?;
+    let response = commanded_stiffness(stats, plan.amplitude_m, alpha);
+    let stroke = params.soft_contact_stroke(stiffness, response, preload_n, 3.0 * se)?;
+    Some(TangentOutcome::Reprobe {
+        reason: ReprobeReason::SoftContact,
+        plan: params.soft_contact_plan(stroke, alpha),
     })
 }
 
