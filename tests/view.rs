@@ -210,16 +210,14 @@ fn a_foxglove_client_receives_what_the_recording_holds_and_a_stalled_one_disturb
 }
 
 /// `afs view --prefix P` attaches to a running stack, serves its topics to a client, and
-/// ends by itself when the stack ends, with a summary of what it published.
+/// ends by itself when the stack ends, with a summary of what it published; the run, the
+/// friction-identification scenario, passes.
 #[test]
 fn afs_view_attaches_to_a_running_stack_and_ends_with_it() {
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let p = prefix("att");
     let _clean = CleanPrefix(p.clone());
-    let run = start_run(
-        &p,
-        &["--scenario", "friction-suppression", "--duration", "8"],
-    );
+    let run = start_run(&p, &["--scenario", "friction-id", "--duration", "8"]);
     wait_running(&p, Duration::from_secs(60));
     let addr = format!("127.0.0.1:{}", free_port());
     let view = KillOnDrop(Some(
@@ -236,7 +234,8 @@ fn afs_view_attaches_to_a_running_stack_and_ends_with_it() {
     c.subscribe(&["/live", "/supervisor"]).unwrap();
     let got = read_to_end(&mut c, Duration::from_secs(120));
     let out = finish(run.take(), "afs run");
-    assert!(run_report(&out).finished);
+    let r = run_report(&out);
+    assert!(r.finished && r.passed, "{}", failed(&r));
     let vout = finish(view.take(), "afs view");
     assert!(
         vout.status.success(),

@@ -243,14 +243,15 @@ sys.exit(2 if opened is None else 0)
 
 /// A client built for an older layout of the servo's state is refused at once, naming both
 /// versions; a Python client still subscribed when the run ends is an observer: the run
-/// passes, names it and the service it reads, and leaves its files alone.
+/// passes, names it and the service it reads, and leaves its files alone. The scenario is the
+/// corner (the surface-tracking scenario's other stack tests cover the flat surface).
 #[test]
 fn an_old_client_is_refused_and_one_attached_at_the_end_is_an_observer() {
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let p = prefix("obs");
     let _clean = CleanPrefix(p.clone());
     let python = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/python");
-    let run = start_run(&p, &["--scenario", "surface-tracking", "--duration", "8"]);
+    let run = start_run(&p, &["--scenario", "corner", "--duration", "8"]);
     wait_running(&p, Duration::from_secs(60));
     let old = Command::new("python3")
         .args(["-c", OLD_CLIENT, &p])

@@ -5,6 +5,9 @@ use afs_shared::experiments::{self, Options};
 use afs_shared::setups::Rig;
 use std::process::Command;
 
+#[cfg(feature = "mujoco")]
+mod mujoco;
+
 fn assert_passed<S>(name: &str, out: &experiments::Outcome<S>) {
     for c in &out.checks {
         assert!(
