@@ -43,8 +43,10 @@ fn assert_correct(out: &Output, r: &RunReport) {
         .collect();
     assert!(
         correct(out, r),
-        "failed checks: {failed:?} (exit {:?})\nstderr: {}",
+        "failed checks: {failed:?} (exit {:?})\nfaults: {:#?}\nprocesses: {:#?}\nstderr: {}",
         out.status.code(),
+        r.chaos.as_ref().map(|c| &c.faults),
+        r.processes,
         String::from_utf8_lossy(&out.stderr)
     );
 }
