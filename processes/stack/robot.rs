@@ -3,8 +3,9 @@
 //! Checked when the file is read, each bad entry named in one line; the servo does not drive
 //! a robot yet, so a run with the table is refused after the checks.
 
+use afs_shared::robot_guard::{Guard, GuardLimits};
 use afs_shared::task_plane::{FrameError, TaskPlane, check_rotation};
-use anyhow::{Result, bail};
+use anyhow::{Result, anyhow, bail};
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -107,21 +108,22 @@ impl RobotTable {
             );
         }
         self.check_tool()?;
-        let l = &self.limits;
-        if !(l.contact_force_n.is_finite() && l.contact_force_n > 0.0) {
-            bail!(
-                "[robot.limits] contact_force_n = {} must be a force above 0 N",
-                l.contact_force_n
-            );
-        }
-        for (axis, [lo, hi]) in ["x", "y", "normal"].iter().zip(l.workspace_m) {
-            if !(lo.is_finite() && hi.is_finite() && lo < hi) {
-                bail!(
-                    "[robot.limits] workspace_m's {axis} range [{lo}, {hi}] must be two numbers, low before high (m)"
-                );
-            }
-        }
+        self.guard()?;
         Ok(())
+    }
+
+    /// The guard of `[robot.limits]`: the workspace box and the contact-force limit that end
+    /// in a hold (docs/franka.md, *The guard*).
+    ///
+    /// # Errors
+    /// A limit that is not a force above zero, or a range that is not low before high.
+    pub fn guard(&self) -> Result<Guard> {
+        let l = &self.limits;
+        Guard::new(GuardLimits {
+            contact_force_n: l.contact_force_n,
+            workspace_m: l.workspace_m,
+        })
+        .map_err(|e| anyhow!("[robot.limits] {e}"))
     }
 
     /// The task plane, its axes checked.
