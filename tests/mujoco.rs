@@ -33,14 +33,6 @@ fn the_stack_runs_on_mujoco_and_a_killed_servo_resumes_it() {
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
 }
 
-fn user_arm() -> String {
-    std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/examples/mujoco/user-arm.xml"
-    ))
-    .unwrap()
-}
-
 /// A user's own arm (examples/mujoco/user-arm.xml: links of 0.45 m and 0.26 m, other masses):
 /// the stack's surface tracking on the flat surface against its lockstep (its fig. 5.6 is
 /// tests/experiments/mujoco.rs).

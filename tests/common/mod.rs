@@ -121,6 +121,15 @@ pub fn assert_refused(out: &Output, what: &dyn std::fmt::Debug, needle: &str) {
     assert!(!err.contains("panicked"), "{what:?}: {err}");
 }
 
+/// examples/mujoco/user-arm.xml: a user's own two-link arm for MuJoCo (docs/mujoco.md).
+pub fn user_arm() -> String {
+    std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/examples/mujoco/user-arm.xml"
+    ))
+    .expect("examples/mujoco/user-arm.xml")
+}
+
 /// examples/stack.toml with `extra` (TOML) appended, written to `dir/stack.toml`: the full
 /// process graph on a set-up of a test's own.
 pub fn stack_file(dir: &std::path::Path, extra: &str) -> PathBuf {

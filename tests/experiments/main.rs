@@ -6,6 +6,9 @@ use afs_shared::setups::Rig;
 use std::process::Command;
 
 #[cfg(feature = "mujoco")]
+#[path = "../common/mod.rs"]
+mod common;
+#[cfg(feature = "mujoco")]
 mod mujoco;
 
 fn assert_passed<S>(name: &str, out: &experiments::Outcome<S>) {

@@ -4,13 +4,13 @@
 //! stack tests (.ci/test); the stacks on MuJoCo are tests/mujoco.rs.
 
 use super::afs;
+use super::common::{assert_refused, user_arm};
 use afs_shared::check::{self, Check};
 use afs_shared::config::SimConfig;
 use afs_shared::experiments::{self, Options};
 use afs_shared::insertion::drive::Drive;
 use afs_shared::setups::{ROBOT_RATES_HZ, set_rate};
 use afs_shared::world::WorldKind;
-use std::process::Output;
 
 fn options(kind: WorldKind, rate_hz: f64) -> Options {
     let mut base = SimConfig::default();
@@ -25,17 +25,6 @@ fn options(kind: WorldKind, rate_hz: f64) -> Options {
 fn passed(checks: &[Check], id: &str, what: &str) {
     let c = check::find(checks, id).unwrap_or_else(|| panic!("{what}: no check {id}"));
     assert!(c.pass, "{what}: {}", c.line());
-}
-
-/// Asserts `out` is a clear refusal of `what`: exit status 2, `needle` in stderr, no panic.
-fn assert_refused(out: &Output, what: &dyn std::fmt::Debug, needle: &str) {
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "{what:?}: {err}");
-    assert!(
-        err.contains(needle),
-        "{what:?}: expected '{needle}' in: {err}"
-    );
-    assert!(!err.contains("panicked"), "{what:?}: {err}");
 }
 
 /// fig. 5.6 (an unknown sinusoid tracked with the tangent estimator) passes every check, and
@@ -125,14 +114,6 @@ fn the_peg_goes_in_on_mujoco() {
         &"insertion --mjcf",
         "afs's generated peg and hole",
     );
-}
-
-fn user_arm() -> String {
-    std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/examples/mujoco/user-arm.xml"
-    ))
-    .unwrap()
 }
 
 /// A user's own arm (examples/mujoco/user-arm.xml: links of 0.45 m and 0.26 m, other masses):
