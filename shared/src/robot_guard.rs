@@ -256,12 +256,6 @@ impl Guard {
     pub fn release(&mut self) {
         self.tripped = None;
     }
-
-    /// The limits.
-    #[must_use]
-    pub fn limits(&self) -> &GuardLimits {
-        &self.limits
-    }
 }
 
 #[cfg(test)]

@@ -279,15 +279,11 @@ pub(super) fn regression_estimate(
     let Some((alpha, stiffness, resid, se)) = fit else {
         return TangentOutcome::Failed(TangentError::Unresolved(ReprobeReason::Ambiguous));
     };
-    if !reprobed {
-        let preload = if hold_mean.is_finite() {
-            hold_mean
-        } else {
-            stats[0].normal_mean_n
-        };
-        if let Some(again) = soft_contact_reprobe(&stats[..count], plan, params, preload, fit) {
-            return again;
-        }
+    let fitted = (alpha, stiffness, se);
+    if !reprobed
+        && let Some(again) = soft_contact_reprobe(&stats[..count], plan, params, hold_mean, fitted)
+    {
+        return again;
     }
     // The thesis's two-probe form: would it fold, or is it ill-conditioned? Judged on the
     // corrected normal: on the uncorrected one the tangential (friction) force leaking into
@@ -360,16 +356,22 @@ pub(super) fn signal_and_noise(stats: &[ProbeStats]) -> (f64, f64) {
 
 /// A first set on a soft contact: the response is small against the noise whatever the answer,
 /// so a re-probe (four probes close to the corrected tangent, on both sides) runs a stroke
-/// scaled to the stiffness the regression `fit` (α0, k_e, residual, standard error) just read,
-/// bounded by the swing it costs at the hold's `preload_n`; None where the contact is not soft.
+/// scaled to the stiffness the regression just read (`fit`: α0 in rad, k_e in N/m and α0's
+/// standard error in rad), bounded by the swing it costs at the hold's mean normal force
+/// `hold_mean_n` (the first probe's where the hold gave none); None where the contact is not
+/// soft.
 fn soft_contact_reprobe(
     stats: &[ProbeStats],
     plan: &ProbePlan,
     params: &TangentParams,
-    preload_n: f64,
-    fit: Option<(f64, f64, f64, f64)>,
+    hold_mean_n: f64,
+    (alpha, stiffness, se): (f64, f64, f64),
 ) -> Option<TangentOutcome> {
-    let (alpha, stiffness, _, se) = fit?;
+    let preload_n = if hold_mean_n.is_finite() {
+        hold_mean_n
+    } else {
+        stats.first()?.normal_mean_n
+    };
     let response = commanded_stiffness(stats, plan.amplitude_m, alpha);
     let stroke = params.soft_contact_stroke(stiffness, response, preload_n, 3.0 * se)?;
     Some(TangentOutcome::Reprobe {
