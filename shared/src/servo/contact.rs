@@ -4,8 +4,8 @@
 //! fit is tight and far from the stiffness in use (docs/contact.md, *Knowing the contact*).
 
 use super::{ServoCore, ServoMode};
-use crate::arm::Pose;
 use crate::contact::{StiffnessEstimate, StiffnessFitState};
+use crate::math::Vec2;
 use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use serde::Serialize;
@@ -84,10 +84,10 @@ impl ServoCore {
         self.derive_amplitude_bound();
     }
 
-    /// Feeds the fit the tool's encoder position (at the measured `pose`) in the task frame and
+    /// Feeds the fit the tool's encoder position (`tip`, m) in the task frame and
     /// the measured normal force, and adopts the fit when it is tight and far from the stiffness
     /// in use. A re-based frame restarts the fit (its coordinates jump).
-    pub(super) fn observe_contact(&mut self, dt: f64, pose: &Pose, normal_n: f64) {
+    pub(super) fn observe_contact(&mut self, dt: f64, tip: Vec2, normal_n: f64) {
         let every = (SAMPLE_PERIOD_S / dt).round().max(1.0) as u32;
         self.contact_phase += 1;
         if self.contact_phase < every {
@@ -99,7 +99,7 @@ impl ServoCore {
             self.stiffness.reset();
             self.stiffness_frame = frame;
         }
-        let r = self.arm.forward_at(pose) - frame.origin;
+        let r = tip - frame.origin;
         let x = -r.dot(&frame.normal());
         self.stiffness
             .push(dt * f64::from(every), x, r.dot(&frame.tangent()), normal_n);
@@ -150,7 +150,7 @@ impl ServoCore {
     /// (a velocity asked for is kept for after the touch), and a normal force of
     /// `touch_fraction` of the preload ends it; the servo then settles the preload as after an
     /// estimate (`Resuming`) and moves on.
-    pub(super) fn approach(&mut self, force: crate::math::Vec2) {
+    pub(super) fn approach(&mut self, force: Vec2) {
         let wanted = self.hybrid.velocity_target();
         if wanted != 0.0 {
             self.track.resume_velocity_m_per_s = wanted;

@@ -1,28 +1,35 @@
 //! The fast loop of the plant/servo board: one tick of hybrid control, friction-suppression
-//! dither and its tuner, inverse kinematics and the PID joint servos.
+//! dither and its tuner, and the drive: inverse kinematics and the PID joint servos of the
+//! two-link arm, or the planar impedance of a task-space arm.
 //!
 //! [`ServoCore::step`] is what the servo process runs at 10 kHz and what the lockstep
-//! simulation runs in simulated time. It allocates nothing, takes no lock, does no I/O and
+//! simulation runs in simulated time; [`ServoCore::step_task`] is its tick on a task-space
+//! drive ([`ServoCore::new_task`]). It allocates nothing, takes no lock, does no I/O and
 //! never panics on bad numbers: a non-finite force is treated as missing data (force loop and
 //! tuner frozen), an unreachable set-point holds the last reachable one.
 
 //!
 //! | file | concept |
 //! |---|---|
+//! | `step` | one tick: the set-point, the drive's command, the triggers, fit and tuner |
+//! | `drive` | what the set-point drives: the two-link arm, or a tool's planar force ([`TaskDrive`]) |
 //! | `params` | the settings ([`ServoParams`], [`SafeParams`], [`TrackingParams`]) |
 //! | `tracking` | modes, triggers, the probe run and the estimator's answer (§5.3.2) |
 //! | `safe` | the safe state on untrusted force data |
 //! | `state` | [`ServoState`]: everything that crosses a restart, made of named parts |
 
 pub(crate) mod contact;
+mod drive;
 mod params;
 mod safe;
 mod state;
+mod step;
 mod tracking;
 
 pub use contact::{
     ContactReport, ContactState, contact_damping, contact_mode_above_dither, dither_damping_ratio,
 };
+pub use drive::{TaskCommand, TaskDrive, TaskInput};
 pub use params::{
     ApproachParams, DriftSource, ProbeForceLoop, SafeParams, ServoParams, TrackingParams,
 };
@@ -33,12 +40,12 @@ pub use tracking::{EstimationCounters, ProbeRequest, ServoMode, TrackState, Trig
 use crate::arm::{Arm, ArmParams, Elbow, JointServo, PidGains, tune_pid_for_bandwidth};
 use crate::dither::Dither;
 use crate::error::ConfigError;
-use crate::hybrid::{HybridCommand, HybridController, SetpointOffset, TaskFrame};
+use crate::hybrid::{HybridController, SetpointOffset, TaskFrame};
 use crate::math::Vec2;
 use crate::probe::ProbeRunner;
 use crate::sensor::Wrench;
 use crate::tangent::TangentOutcome;
-use crate::tuner::{Tuner, TunerContext, TunerInput, TunerReport};
+use crate::tuner::{Tuner, TunerContext, TunerReport};
 use nalgebra::{Matrix2, Vector2};
 use serde::Serialize;
 
@@ -94,9 +101,8 @@ pub struct ServoDiag {
 #[derive(Debug, Clone)]
 pub struct ServoCore {
     params: ServoParams,
-    arm: Arm,
-    elbow: Elbow,
-    pid: JointServo,
+    /// What the set-point drives: the two-link arm's joint servos, or a tool's planar force.
+    drive: drive::Drive,
     hybrid: HybridController,
     dither: Dither,
     tuner: Tuner,
@@ -105,7 +111,6 @@ pub struct ServoCore {
     tuning: bool,
     force_control: bool,
     tare: Wrench,
-    last_q_d: Vector2<f64>,
     diag: ServoDiag,
     mode: ServoMode,
     probe: ProbeRunner,
@@ -262,6 +267,81 @@ impl ServoCore {
         let normal_mass = along(&arm, q0, m_inv, frame.normal());
         let kd_inv = Matrix2::new(1.0 / gains[0].kd, 0.0, 0.0, 1.0 / gains[1].kd);
         let normal_servo_damping = along(&arm, q0, kd_inv, frame.normal());
+        let drive = drive::Drive::TwoLink(drive::TwoLink {
+            arm,
+            elbow,
+            pid,
+            last_q_d: q0,
+        });
+        Ok(Self::with_drive(
+            params,
+            drive,
+            frame,
+            f0,
+            [normal_mass, normal_servo_damping, k_servo],
+        ))
+    }
+
+    /// A servo on a task-space drive ([`TaskDrive`]: an arm whose torques are `Jᵀ W`, such as
+    /// the FR3 through [`crate::task_plane`]), the tool at `position_m` (m, in the plane) with
+    /// the measured sensor-frame wrench `wrench0` at its angle `drive.theta_rad` (the angle it
+    /// holds), and an estimated tangent `tangent_angle` (rad, in the plane). Its ticks are
+    /// [`ServoCore::step_task`].
+    ///
+    /// # Errors
+    /// [`ConfigError`] for settings that do not validate, or an inertia or a gain that is not
+    /// finite and positive.
+    pub fn new_task(
+        params: ServoParams,
+        drive: TaskDrive,
+        position_m: Vec2,
+        wrench0: Wrench,
+        tangent_angle: f64,
+    ) -> Result<Self, ConfigError> {
+        params.validate()?;
+        if !drive.is_valid() {
+            return Err(ConfigError::setting(
+                "task drive's inertia and gains",
+                drive
+                    .inertia
+                    .min()
+                    .min(drive.gains.stiffness.min())
+                    .min(drive.gains.damping.min()),
+                "must be finite and > 0 (task_plane::planar_inertia and planar_gains give them)",
+            ));
+        }
+        if !(position_m.iter().all(|v| v.is_finite()) && tangent_angle.is_finite()) {
+            return Err(ConfigError::setting(
+                "task drive's start",
+                position_m.x + position_m.y + tangent_angle,
+                "the tool's position and the tangent must be finite",
+            ));
+        }
+        let (s, c) = drive.theta_rad.sin_cos();
+        let f0 = drive::to_plane(s, c, wrench0);
+        let frame = TaskFrame::new(position_m, tangent_angle);
+        let mode = drive.along(frame.normal());
+        Ok(Self::with_drive(
+            params,
+            drive::Drive::Task(drive),
+            frame,
+            f0,
+            mode,
+        ))
+    }
+
+    /// What both constructors share: the servo on `drive`, its task frame `frame`, the contact
+    /// force at the start `f0` (N, in the plane) and the contact mode's arm side along the
+    /// normal `contact_mode` (mass kg, damping N·s/m, stiffness N/m).
+    fn with_drive(
+        params: ServoParams,
+        drive: drive::Drive,
+        frame: TaskFrame,
+        f0: Vec2,
+        contact_mode: [f64; 3],
+    ) -> Self {
+        let [normal_mass, _, k_servo] = contact_mode;
+        let tangent_angle = frame.tangent_angle;
         let signal_delay = params
             .hybrid
             .force_signal_delay_s
@@ -299,9 +379,7 @@ impl ServoCore {
             .unwrap_or(0);
         let mut servo = Self {
             params,
-            arm,
-            elbow,
-            pid,
+            drive,
             hybrid,
             dither: Dither::new(params.dither.frequency_hz),
             tuner,
@@ -310,7 +388,6 @@ impl ServoCore {
             tuning: false,
             force_control: true,
             tare: Wrench::default(),
-            last_q_d: q0,
             diag: ServoDiag::default(),
             mode,
             probe: ProbeRunner::new(probe_capacity, probe_decimation(params.rate_hz)),
@@ -337,7 +414,7 @@ impl ServoCore {
             confirm_corner: false,
             // Derived below with the other contact-dependent gains.
             normal_damping: 0.0,
-            contact_mode: [normal_mass, normal_servo_damping, k_servo],
+            contact_mode,
             loop_delay,
             stiffness: crate::contact::StiffnessEstimator::new(Default::default()),
             stiffness_frame: frame,
@@ -351,17 +428,13 @@ impl ServoCore {
         } else {
             servo.use_stiffness(params.hybrid.stiffness_estimate_n_per_m);
         }
-        Ok(servo)
-    }
-
-    fn to_world(arm: &Arm, q: Vector2<f64>, w: Wrench) -> Vec2 {
-        Self::to_world_at(&arm.pose(q), w)
+        servo
     }
 
     /// Sensor-frame force to world: rotation by the link-2 angle q1+q2.
-    fn to_world_at(p: &crate::arm::Pose, w: Wrench) -> Vec2 {
-        let (s, c) = (p.s12, p.c12);
-        Vec2::new(c * w.force.x - s * w.force.y, s * w.force.x + c * w.force.y)
+    fn to_world(arm: &Arm, q: Vector2<f64>, w: Wrench) -> Vec2 {
+        let p = arm.pose(q);
+        drive::to_plane(p.s12, p.c12, w)
     }
 
     /// Sets the sensor's zero-load reading (taken in free air before contact); it is
@@ -392,9 +465,12 @@ impl ServoCore {
         &mut self.hybrid
     }
 
-    /// Joint PID gains.
-    pub fn gains(&self) -> [PidGains; 2] {
-        self.pid.gains
+    /// Joint PID gains of the two-link arm (`None` on a task-space drive).
+    pub fn gains(&self) -> Option<[PidGains; 2]> {
+        match &self.drive {
+            drive::Drive::TwoLink(two) => Some(two.pid.gains),
+            drive::Drive::Task(_) => None,
+        }
     }
 
     /// Largest admissible dither amplitude (m).
@@ -468,168 +544,5 @@ impl ServoCore {
     /// What started the last estimation.
     pub fn last_trigger(&self) -> Option<Trigger> {
         self.last_trigger
-    }
-
-    /// One fast-loop tick: returns the joint torques (N·m).
-    pub fn step(&mut self, inp: &ServoInput, dt: f64) -> Vector2<f64> {
-        let valid = inp.force_valid
-            && inp.wrench.force.x.is_finite()
-            && inp.wrench.force.y.is_finite()
-            && inp.wrench.torque.is_finite();
-        let pose = self.arm.pose(inp.q);
-        let wrench = inp.wrench.tared(self.tare);
-        let force = if valid {
-            Self::to_world_at(&pose, wrench)
-        } else {
-            Vec2::zeros()
-        };
-        self.update_safe(valid, dt);
-        let safe = self.safe.is_some();
-        let dither = self.dither.step(dt);
-        let mut extra = SetpointOffset::default();
-        let mode = if safe { None } else { Some(self.mode) };
-        match mode {
-            // Probe only once the force loop has brought the normal force back to the preload
-            // (it is frozen during the strokes), or after waiting 3 s.
-            Some(ServoMode::Stopping)
-                if self.hybrid.nominal_velocity() == 0.0 && self.force_settled(dt) =>
-            {
-                let plan = self.plan_with_dither(self.params.tangent.first_plan());
-                self.probe.start(plan, self.hybrid.frame().tangent_angle);
-                self.reprobe = false;
-                self.mode = ServoMode::Probing;
-            }
-            Some(ServoMode::Resuming) if self.force_settled(dt) => {
-                self.mode = ServoMode::Track;
-                self.force_armed = false;
-                self.track.drift_rad = 0.0;
-                self.hybrid.set_velocity(self.track.resume_velocity_m_per_s);
-                if let Some(a) = self.resume_a_omega.take() {
-                    self.set_a_omega(a);
-                }
-            }
-            Some(ServoMode::Approach) => self.approach(force),
-            Some(ServoMode::Probing) => {
-                extra = self.probe.step(dt, force, self.arm.forward_at(&pose));
-                self.last_stroke = extra;
-                if self.probe.finished() {
-                    self.mode = ServoMode::AwaitingEstimate;
-                }
-            }
-            _ => {}
-        }
-        let probing = self.mode == ServoMode::Probing;
-        let force_loop = valid && self.force_control && (!probing || self.probes_hold_force());
-        self.hybrid
-            .set_rate_limit(if self.mode == ServoMode::Approach {
-                self.approach_speed
-            } else {
-                self.hybrid.params().max_normal_rate_m_per_s
-            });
-        // Frozen integrators make the stroke response stationary (they would otherwise relax a
-        // DC offset picked up in the ramp-in over their ~1 s time constant).
-        self.pid.set_integrating(!probing);
-        let cmd: HybridCommand = self.hybrid.step(dt, force, dither, extra, force_loop);
-        let mut held = false;
-        let (q_d, pose_d) = match self.arm.inverse_pose(cmd.position, self.elbow) {
-            Ok(x) => x,
-            Err(_) => {
-                held = true;
-                (self.last_q_d, self.arm.pose(self.last_q_d))
-            }
-        };
-        let jinv = if held {
-            None
-        } else {
-            self.arm.jacobian_at(&pose_d).try_inverse()
-        };
-        let (qd_d, qdd_d) = match jinv {
-            Some(ji) => {
-                let qd_d = ji * cmd.velocity;
-                let qdd_d =
-                    ji * (cmd.acceleration - self.arm.jacobian_dot_at(&pose_d, qd_d) * qd_d);
-                (qd_d, qdd_d)
-            }
-            None => (Vector2::zeros(), Vector2::zeros()),
-        };
-        self.last_q_d = q_d;
-        let mut feedforward = if self.params.inertia_feedforward {
-            self.arm.inverse_dynamics_at(&pose_d, qd_d, qdd_d)
-        } else {
-            Vector2::zeros()
-        };
-        // The Jacobian at the measured pose: the preload's feedforward, and the tip's velocity
-        // (the contact mode's damping, the tuner's tangential velocity, the drift trigger).
-        let j = self.arm.jacobian_at(&pose);
-        let tip_velocity = j * inp.qd;
-        let n_hat = self.hybrid.frame().normal();
-        // The preload's feedforward depends on the configuration and the desired force, not on
-        // the measurement: it stays on in the safe state (the set-point backs off instead).
-        if self.params.preload_feedforward {
-            feedforward -= j.transpose() * (n_hat * self.hybrid.params().preload_n);
-        }
-        if self.normal_damping > 0.0 {
-            // Damps the contact mode: the normal velocity's error against the set-point's own
-            // (the force loop's rate), not against a probe stroke's, which presses into the
-            // surface on purpose (docs/contact.md).
-            let error = (tip_velocity - cmd.velocity + extra.velocity).dot(&n_hat);
-            feedforward -= j.transpose() * (n_hat * (self.normal_damping * error));
-        }
-        let tau = self.pid.torque(q_d, qd_d, inp.q, inp.qd, feedforward, dt);
-
-        // Tuner: friction resisting the nominal motion, normalised to the model's reference force.
-        let t_hat = self.hybrid.frame().tangent();
-        let dir = if self.hybrid.velocity_target() < 0.0 {
-            -1.0
-        } else {
-            1.0
-        };
-        let v_tan = tip_velocity.dot(&t_hat);
-        let f_ref = self.params.friction_model_reference_n;
-        let normal = cmd.normal_force_n;
-        let ratio = if normal > 0.2 * f_ref {
-            f_ref / normal
-        } else {
-            1.0
-        };
-        let friction = -cmd.tangential_force_n * dir * ratio;
-        let nominal = self.hybrid.nominal_velocity().abs();
-        if valid && !safe {
-            self.check_triggers(dt, normal, -tip_velocity.dot(&n_hat));
-            self.guard_contact(dt, normal);
-            if self.observes_contact(normal) {
-                self.observe_contact(dt, &pose, normal);
-            }
-        }
-        if self.tuning && valid && !safe && nominal > 0.0 && self.mode == ServoMode::Track {
-            let input = TunerInput {
-                friction_n: friction,
-                velocity_m_per_s: v_tan * dir,
-                nominal_m_per_s: nominal,
-                phase: self.dither.phase(),
-                period_end: self.dither.completed_period(),
-                normal_n: normal,
-            };
-            let a = self.tuner.update(&self.ctx, &input);
-            self.dither.set_velocity_amplitude(a, self.amplitude_bound);
-        }
-        self.diag = ServoDiag {
-            set_point: cmd.position,
-            normal_force_n: normal,
-            tangential_force_n: cmd.tangential_force_n,
-            friction_normalized_n: friction,
-            a_omega_m_per_s: self.dither.velocity_amplitude(),
-            dither_amplitude_m: self.dither.amplitude(),
-            dither_phase: self.dither.phase(),
-            nominal_velocity_m_per_s: self.hybrid.nominal_velocity(),
-            tangent_velocity_m_per_s: v_tan,
-            torque: tau,
-            setpoint_held: held,
-            mode: self.mode,
-            tangent_angle_rad: self.hybrid.frame().tangent_angle,
-            velocity_target_m_per_s: self.hybrid.velocity_target(),
-            safe,
-        };
-        tau
     }
 }

@@ -159,7 +159,7 @@ impl ServoCore {
             last_trigger: self.last_trigger.map_or(0, u32::from),
             contact_lost_ticks: self.contact_lost_ticks,
             counters: self.counters,
-            joints: self.pid.state(),
+            joints: self.joint_state(),
             hybrid: self.hybrid.state(),
             dither: self.dither.state(),
             tuner: self.tuner.state(),
@@ -167,7 +167,7 @@ impl ServoCore {
             safe: self.safe.unwrap_or_default(),
             tare: self.tare.into(),
             normal_window: self.normal_window.summary(),
-            last_q_d_rad: [self.last_q_d[0], self.last_q_d[1]],
+            last_q_d_rad: self.last_q_d(),
             last_estimate_rad,
             last_estimate_at_m,
             resume_a_omega_m_per_s: self.resume_a_omega.unwrap_or(0.0),
@@ -190,7 +190,10 @@ impl ServoCore {
         let has = |f: ServoStateFlags| st.flags.contains(f);
         self.counters = st.counters;
         self.contact_lost_ticks = st.contact_lost_ticks;
-        self.pid.restore(&st.joints);
+        if let super::drive::Drive::TwoLink(two) = &mut self.drive {
+            two.pid.restore(&st.joints);
+            two.last_q_d = Vector2::new(st.last_q_d_rad[0], st.last_q_d_rad[1]);
+        }
         self.hybrid.restore(&st.hybrid);
         self.restore_contact(&st.contact);
         self.dither.restore(&st.dither);
@@ -204,7 +207,6 @@ impl ServoCore {
         self.force_armed = has(ServoStateFlags::FORCE_ARMED);
         self.confirm_corner = has(ServoStateFlags::CONFIRM_CORNER);
         self.last_trigger = Trigger::try_from(st.last_trigger).ok();
-        self.last_q_d = Vector2::new(st.last_q_d_rad[0], st.last_q_d_rad[1]);
         self.last_estimate = has(ServoStateFlags::LAST_ESTIMATE)
             .then_some((st.last_estimate_rad, st.last_estimate_at_m));
         self.resume_a_omega =
@@ -225,5 +227,23 @@ impl ServoCore {
             self.mode = ServoMode::Stopping;
         }
         Ok(())
+    }
+}
+
+impl ServoCore {
+    /// The two-link arm's joint servos' state (zeros on a task-space drive, which has none).
+    fn joint_state(&self) -> JointServoState {
+        match &self.drive {
+            super::drive::Drive::TwoLink(two) => two.pid.state(),
+            super::drive::Drive::Task(_) => JointServoState::default(),
+        }
+    }
+
+    /// The two-link arm's last reachable joint set-point (rad; zeros on a task-space drive).
+    fn last_q_d(&self) -> [f64; 2] {
+        match &self.drive {
+            super::drive::Drive::TwoLink(two) => [two.last_q_d[0], two.last_q_d[1]],
+            super::drive::Drive::Task(_) => [0.0; 2],
+        }
     }
 }
