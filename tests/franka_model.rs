@@ -340,3 +340,141 @@ fn theta_gains_from_the_inertia_hold_the_sampling_limit() {
     let (_, worst) = close_the_loop(&theta_from(1e-6), 500);
     assert!(worst > 0.2, "θ's largest error {worst} rad");
 }
+
+/// The thesis's controller on the FR3 (`ServoCore::new_task`, docs/franka.md, *The servo on a
+/// task-space arm*): the hybrid force loop presses the flange against a frictionless wall in
+/// the plane (normal +y, stiffness `k_e`) with the preload, and moves along it at `speed`
+/// (m/s) for 3 s, at 1 kHz through the task-plane torque law and the FR3's limits. The wall's
+/// force reaches the arm through `Jᵀ`, and a sensor on the flange reads it in its own frame.
+/// At the start the wall is pressed with 1.5 times the preload, and the flange moves along x
+/// at `kick` (m/s). Returns the contact force after every cycle (N) and the last planar state.
+fn press_the_wall(
+    k_e: f64,
+    speed: f64,
+    kick: f64,
+) -> (Vec<f64>, afs_shared::task_plane::PlanarState) {
+    use afs_shared::sensor::Wrench;
+    use afs_shared::servo::{ServoCore, ServoParams, TaskDrive, TaskInput};
+    use afs_shared::task_plane::{Hold, TorqueLimits, joint_torques, limit_torques};
+    use nalgebra::Vector2;
+    const SUBSTEPS: usize = 10;
+    let m = model();
+    let ready = Q::from(READY);
+    let (r0, p0) = flange_pose(&m, &ready);
+    let plane = TaskPlane::new(Matrix3::identity(), p0, r0).expect("rotations");
+    let hold = Hold {
+        normal_stiffness_n_per_m: 800.0,
+        normal_damping_n_s_per_m: 60.0,
+        tilt_stiffness_nm_per_rad: 40.0,
+        tilt_damping_nm_s_per_rad: 2.0,
+        null_stiffness_nm_per_rad: 4.0,
+        null_damping_nm_s_per_rad: 0.8,
+    };
+    let dt = 1e-3;
+    let mut params = ServoParams {
+        rate_hz: 1.0 / dt,
+        ..ServoParams::default()
+    };
+    params.hybrid.stiffness_estimate_n_per_m = k_e;
+    let preload = params.hybrid.preload_n;
+    // The wall stands where the flange presses it with 1.5 times the preload.
+    let wall_y = 1.5 * preload / k_e;
+    let contact = |y: f64| k_e * (wall_y - y).max(0.0);
+    let reading = |f: f64, theta: f64| {
+        let (s, c) = theta.sin_cos();
+        Wrench {
+            force: Vector2::new(s * f, c * f),
+            torque: 0.0,
+        }
+    };
+    let j0 = jacobian(&m, &ready);
+    let inertia = plane.planar_inertia(&j0, &mass(&m, &ready, 0.0)).unwrap();
+    let drive = TaskDrive {
+        inertia,
+        gains: planar_gains(&inertia, 10.0, 1.0, dt).unwrap(),
+        theta_rad: 0.0,
+    };
+    let mut servo = ServoCore::new_task(
+        params,
+        drive,
+        Vector2::zeros(),
+        reading(1.5 * preload, 0.0),
+        0.0,
+    )
+    .expect("a valid task drive");
+    servo.hybrid_mut().set_velocity(speed);
+    let limits = TorqueLimits::fr3();
+    // The joint rates that move the flange along x at `kick` and nothing else: J⁺ (kick, 0…).
+    let twist = SVector::<f64, 6>::new(kick, 0.0, 0.0, 0.0, 0.0, 0.0);
+    let dq0 = j0.transpose() * (j0 * j0.transpose()).cholesky().unwrap().solve(&twist);
+    let (mut q, mut dq, mut last) = (ready, dq0, Q::zeros());
+    let (mut forces, mut state) = (Vec::new(), None);
+    for _ in 0..3000 {
+        let (r, p) = flange_pose(&m, &q);
+        let j = jacobian(&m, &q);
+        let s = plane.planar(&r, &p, &j, &dq);
+        let inp = TaskInput {
+            position_m: s.position_m,
+            velocity_m_per_s: s.velocity_m_per_s,
+            theta_rad: s.theta_rad,
+            theta_rate_rad_per_s: s.theta_rate_rad_per_s,
+            wrench: reading(contact(s.position_m.y), s.theta_rad),
+            force_valid: true,
+        };
+        let out = servo.step_task(&inp, dt);
+        let w = plane.wrench(&s, out.force_n, out.moment_nm, 0.0, &hold);
+        let mass = mass(&m, &q, 0.0);
+        let c = coriolis(&m, &q, &dq);
+        let (tau, full) = joint_torques(&j, &mass, &c, &q, &dq, &ready, &w, &hold);
+        assert!(full, "the arm reached a singularity");
+        last = limit_torques(&tau, &last, &limits, dt).torque_nm;
+        // The wall's force, sub-stepped on the flange's height in the plane, linear in q over
+        // the cycle (the plane's y axis is the base frame's).
+        let m_chol = mass.cholesky().expect("M > 0");
+        let q_cycle = q;
+        for _ in 0..SUBSTEPS {
+            let y = s.position_m.y + (j.fixed_rows::<1>(1) * (q - q_cycle))[0];
+            let external =
+                j.transpose() * SVector::<f64, 6>::new(0.0, contact(y), 0.0, 0.0, 0.0, 0.0);
+            dq += m_chol.solve(&(last + external - c)) * (dt / SUBSTEPS as f64);
+            q += dq * (dt / SUBSTEPS as f64);
+        }
+        forces.push(contact(s.position_m.y));
+        state = Some(s);
+    }
+    (forces, state.expect("cycles ran"))
+}
+
+/// Standing on 10 kN/m and 100 kN/m, from 1.5 times the preload and a kick along the wall, the
+/// force loop settles the preload on the FR3 (mean of the last 0.5 s within 1 %) while the
+/// impedance brings x back and holds the height and the tilt.
+#[test]
+fn the_thesis_s_force_loop_holds_the_preload_on_the_fr3() {
+    for k_e in [1e4, 1e5] {
+        let (forces, s) = press_the_wall(k_e, 0.0, 0.005);
+        let preload = afs_shared::servo::ServoParams::default().hybrid.preload_n;
+        let tail = &forces[2500..];
+        let mean = tail.iter().sum::<f64>() / tail.len() as f64;
+        assert!(
+            (mean - preload).abs() < 0.01 * preload,
+            "k_e {k_e:e}: {mean} N"
+        );
+        assert!(s.position_m.x.abs() < 1e-4, "k_e {k_e:e}: {s:?}");
+        assert!(s.normal_m.abs() < 1e-3 && s.tilt_rad.amax() < 5e-3, "{s:?}");
+    }
+}
+
+/// Moving at 5 mm/s along the wall, the FR3's flange keeps the contact force within 10 % of the
+/// preload after the first 0.5 s and travels the set-point's distance.
+#[test]
+fn the_thesis_s_force_loop_tracks_along_a_wall_on_the_fr3() {
+    for k_e in [1e4, 1e5] {
+        let (forces, s) = press_the_wall(k_e, 0.005, 0.0);
+        let preload = afs_shared::servo::ServoParams::default().hybrid.preload_n;
+        let worst = forces[500..]
+            .iter()
+            .fold(0.0_f64, |w, f| w.max((f - preload).abs() / preload));
+        assert!(worst < 0.1, "k_e {k_e:e}: worst deviation {worst}");
+        assert!(s.position_m.x > 0.014, "k_e {k_e:e}: {s:?}");
+    }
+}
