@@ -341,35 +341,47 @@ fn theta_gains_from_the_inertia_hold_the_sampling_limit() {
     assert!(worst > 0.2, "θ's largest error {worst} rad");
 }
 
-/// The thesis's controller on the FR3 (`ServoCore::new_task`, docs/franka.md, *The servo on a
-/// task-space arm*): the hybrid force loop presses the flange against a frictionless wall in
-/// the plane (normal +y, stiffness `k_e`) with the preload, and moves along it at `speed`
-/// (m/s) for 3 s, at 1 kHz through the task-plane torque law and the FR3's limits. The wall's
-/// force reaches the arm through `Jᵀ`, and a sensor on the flange reads it in its own frame.
-/// At the start the wall is pressed with 1.5 times the preload, and the flange moves along x
-/// at `kick` (m/s). Returns the contact force after every cycle (N) and the last planar state.
+/// The thesis's controller on the FR3, one cycle at a time through `ArmCycle` (docs/franka.md,
+/// *One cycle on the arm*): the servo's task drive presses the flange against a frictionless
+/// wall in the plane (normal +y, stiffness `k_e`) with the preload, and moves along it at
+/// `speed` (m/s) for 3 s at 1 kHz, guarded by `limits`. The wall's force reaches the arm
+/// through `Jᵀ`, and a sensor on the flange reads it in its own frame. At the start the wall
+/// is pressed with 1.5 times the preload, and the flange moves along x at `kick` (m/s).
+struct Pressed {
+    /// The contact force after every cycle (N).
+    forces: Vec<f64>,
+    /// The last planar state.
+    state: afs_shared::task_plane::PlanarState,
+    /// The guard's trip, if it tripped.
+    tripped: Option<(
+        afs_shared::robot_guard::Trip,
+        afs_shared::robot_guard::HoldPose,
+    )>,
+    /// The planar stiffness the hold and the drive use (N/m, x and y; N·m/rad).
+    stiffness: Vector3<f64>,
+    /// The largest change of a joint's command from one cycle to the next (N·m).
+    largest_step_nm: f64,
+    /// Cycles in which the rate limit cut a joint's command.
+    rate_limited_cycles: usize,
+}
+
 fn press_the_wall(
     k_e: f64,
     speed: f64,
     kick: f64,
-) -> (Vec<f64>, afs_shared::task_plane::PlanarState) {
+    limits: afs_shared::robot_guard::GuardLimits,
+) -> Pressed {
+    use afs_shared::robot_cycle::{ArmCycle, ArmCycleParams, ArmState};
+    use afs_shared::robot_guard::Guard;
     use afs_shared::sensor::Wrench;
-    use afs_shared::servo::{ServoCore, ServoParams, TaskDrive, TaskInput};
-    use afs_shared::task_plane::{Hold, TorqueLimits, joint_torques, limit_torques};
+    use afs_shared::servo::{ServoCore, ServoParams, TaskDrive};
+    use afs_shared::task_plane::{Hold, TorqueLimits};
     use nalgebra::Vector2;
     const SUBSTEPS: usize = 10;
     let m = model();
     let ready = Q::from(READY);
     let (r0, p0) = flange_pose(&m, &ready);
     let plane = TaskPlane::new(Matrix3::identity(), p0, r0).expect("rotations");
-    let hold = Hold {
-        normal_stiffness_n_per_m: 800.0,
-        normal_damping_n_s_per_m: 60.0,
-        tilt_stiffness_nm_per_rad: 40.0,
-        tilt_damping_nm_s_per_rad: 2.0,
-        null_stiffness_nm_per_rad: 4.0,
-        null_damping_nm_s_per_rad: 0.8,
-    };
     let dt = 1e-3;
     let mut params = ServoParams {
         rate_hz: 1.0 / dt,
@@ -389,9 +401,10 @@ fn press_the_wall(
     };
     let j0 = jacobian(&m, &ready);
     let inertia = plane.planar_inertia(&j0, &mass(&m, &ready, 0.0)).unwrap();
+    let gains = planar_gains(&inertia, 10.0, 1.0, dt).unwrap();
     let drive = TaskDrive {
         inertia,
-        gains: planar_gains(&inertia, 10.0, 1.0, dt).unwrap(),
+        gains,
         theta_rad: 0.0,
     };
     let mut servo = ServoCore::new_task(
@@ -403,64 +416,119 @@ fn press_the_wall(
     )
     .expect("a valid task drive");
     servo.hybrid_mut().set_velocity(speed);
-    let limits = TorqueLimits::fr3();
+    let mut cycle = ArmCycle::new(
+        plane,
+        ArmCycleParams {
+            hold: Hold {
+                normal_stiffness_n_per_m: 800.0,
+                normal_damping_n_s_per_m: 60.0,
+                tilt_stiffness_nm_per_rad: 40.0,
+                tilt_damping_nm_s_per_rad: 2.0,
+                null_stiffness_nm_per_rad: 4.0,
+                null_damping_nm_s_per_rad: 0.8,
+            },
+            posture: ready,
+            limits: TorqueLimits::fr3(),
+            normal_target_m: 0.0,
+            guard_gains: gains,
+        },
+        Guard::new(limits).expect("valid limits"),
+    );
     // The joint rates that move the flange along x at `kick` and nothing else: J⁺ (kick, 0…).
     let twist = SVector::<f64, 6>::new(kick, 0.0, 0.0, 0.0, 0.0, 0.0);
     let dq0 = j0.transpose() * (j0 * j0.transpose()).cholesky().unwrap().solve(&twist);
     let (mut q, mut dq, mut last) = (ready, dq0, Q::zeros());
-    let (mut forces, mut state) = (Vec::new(), None);
+    let (mut forces, mut state, mut tripped) = (Vec::new(), None, None);
+    let (mut largest_step_nm, mut rate_limited_cycles) = (0.0_f64, 0);
     for _ in 0..3000 {
         let (r, p) = flange_pose(&m, &q);
-        let j = jacobian(&m, &q);
-        let s = plane.planar(&r, &p, &j, &dq);
-        let inp = TaskInput {
-            position_m: s.position_m,
-            velocity_m_per_s: s.velocity_m_per_s,
-            theta_rad: s.theta_rad,
-            theta_rate_rad_per_s: s.theta_rate_rad_per_s,
-            wrench: reading(contact(s.position_m.y), s.theta_rad),
-            force_valid: true,
+        let arm = ArmState {
+            q,
+            dq,
+            last_command_nm: last,
+            tool_rotation: r,
+            tool_position_m: p,
+            jacobian: jacobian(&m, &q),
+            mass: mass(&m, &q, 0.0),
+            coriolis: coriolis(&m, &q, &dq),
         };
-        let out = servo.step_task(&inp, dt);
-        let w = plane.wrench(&s, out.force_n, out.moment_nm, 0.0, &hold);
-        let mass = mass(&m, &q, 0.0);
-        let c = coriolis(&m, &q, &dq);
-        let (tau, full) = joint_torques(&j, &mass, &c, &q, &dq, &ready, &w, &hold);
-        assert!(full, "the arm reached a singularity");
-        last = limit_torques(&tau, &last, &limits, dt).torque_nm;
-        // The wall's force, sub-stepped on the flange's height in the plane, linear in q over
-        // the cycle (the plane's y axis is the base frame's).
-        let m_chol = mass.cholesky().expect("M > 0");
+        // The sensor turns with the tool: its reading is in the tool's θ.
+        let now = plane.planar(&r, &p, &arm.jacobian, &dq);
+        let y0 = now.position_m.y;
+        let out = cycle.cycle(
+            &mut servo,
+            &arm,
+            reading(contact(y0), now.theta_rad),
+            true,
+            dt,
+        );
+        assert!(out.null_space, "the arm reached a singularity");
+        largest_step_nm = largest_step_nm.max((out.torque.torque_nm - last).amax());
+        rate_limited_cycles += usize::from(out.torque.rate_limited != 0);
+        last = out.torque.torque_nm;
+        // The wall's force, sub-stepped on the flange's y in the plane, linear in q over the
+        // cycle (the plane's y axis is the base frame's).
+        let m_chol = arm.mass.cholesky().expect("M > 0");
+        let j = arm.jacobian;
         let q_cycle = q;
         for _ in 0..SUBSTEPS {
-            let y = s.position_m.y + (j.fixed_rows::<1>(1) * (q - q_cycle))[0];
-            let external =
-                j.transpose() * SVector::<f64, 6>::new(0.0, contact(y), 0.0, 0.0, 0.0, 0.0);
-            dq += m_chol.solve(&(last + external - c)) * (dt / SUBSTEPS as f64);
+            let y = y0 + (j.fixed_rows::<1>(1) * (q - q_cycle))[0];
+            let wall = SVector::<f64, 6>::new(0.0, contact(y), 0.0, 0.0, 0.0, 0.0);
+            let ddq = m_chol.solve(&(last + j.transpose() * wall - arm.coriolis));
+            dq += ddq * (dt / SUBSTEPS as f64);
             q += dq * (dt / SUBSTEPS as f64);
         }
-        forces.push(contact(s.position_m.y));
-        state = Some(s);
+        forces.push(contact(y0));
+        state = Some(out.planar);
+        tripped = out.tripped;
     }
-    (forces, state.expect("cycles ran"))
+    Pressed {
+        forces,
+        state: state.expect("cycles ran"),
+        tripped,
+        stiffness: gains.stiffness,
+        largest_step_nm,
+        rate_limited_cycles,
+    }
+}
+
+/// The guard's limits of a stack file's `[robot.limits]` defaults.
+fn roomy() -> afs_shared::robot_guard::GuardLimits {
+    afs_shared::robot_guard::GuardLimits {
+        contact_force_n: 30.0,
+        workspace_m: [[-0.15, 0.15], [-0.15, 0.15], [-0.05, 0.05]],
+    }
+}
+
+fn preload() -> f64 {
+    afs_shared::servo::ServoParams::default().hybrid.preload_n
 }
 
 /// Standing on 10 kN/m and 100 kN/m, from 1.5 times the preload and a kick along the wall, the
 /// force loop settles the preload on the FR3 (mean of the last 0.5 s within 1 %) while the
-/// impedance brings x back and holds the height and the tilt.
+/// impedance brings x back and holds the height and the tilt. The first cycles, from no torque
+/// to the preload's, are cut by the FR3's rate limit: no joint's command changes by more than
+/// 1 N·m per cycle.
 #[test]
 fn the_thesis_s_force_loop_holds_the_preload_on_the_fr3() {
     for k_e in [1e4, 1e5] {
-        let (forces, s) = press_the_wall(k_e, 0.0, 0.005);
-        let preload = afs_shared::servo::ServoParams::default().hybrid.preload_n;
-        let tail = &forces[2500..];
+        let run = press_the_wall(k_e, 0.0, 0.005, roomy());
+        let tail = &run.forces[2500..];
         let mean = tail.iter().sum::<f64>() / tail.len() as f64;
         assert!(
-            (mean - preload).abs() < 0.01 * preload,
+            (mean - preload()).abs() < 0.01 * preload(),
             "k_e {k_e:e}: {mean} N"
         );
+        let s = run.state;
         assert!(s.position_m.x.abs() < 1e-4, "k_e {k_e:e}: {s:?}");
         assert!(s.normal_m.abs() < 1e-3 && s.tilt_rad.amax() < 5e-3, "{s:?}");
+        assert!(run.tripped.is_none(), "{:?}", run.tripped);
+        assert!(run.rate_limited_cycles > 0, "the rate limit never cut");
+        assert!(
+            run.largest_step_nm <= 1.0 + 1e-12,
+            "{} N·m",
+            run.largest_step_nm
+        );
     }
 }
 
@@ -469,12 +537,64 @@ fn the_thesis_s_force_loop_holds_the_preload_on_the_fr3() {
 #[test]
 fn the_thesis_s_force_loop_tracks_along_a_wall_on_the_fr3() {
     for k_e in [1e4, 1e5] {
-        let (forces, s) = press_the_wall(k_e, 0.005, 0.0);
-        let preload = afs_shared::servo::ServoParams::default().hybrid.preload_n;
-        let worst = forces[500..]
+        let run = press_the_wall(k_e, 0.005, 0.0, roomy());
+        let worst = run.forces[500..]
             .iter()
-            .fold(0.0_f64, |w, f| w.max((f - preload).abs() / preload));
+            .fold(0.0_f64, |w, f| w.max((f - preload()).abs() / preload()));
         assert!(worst < 0.1, "k_e {k_e:e}: worst deviation {worst}");
-        assert!(s.position_m.x > 0.014, "k_e {k_e:e}: {s:?}");
+        assert!(
+            run.state.position_m.x > 0.014,
+            "k_e {k_e:e}: {:?}",
+            run.state
+        );
     }
+}
+
+/// Moving along the wall into the workspace box's x face at 8 mm, the guard trips there, names
+/// the axis, and the hold keeps the flange on the face (within 0.5 mm after the rest of 3 s).
+#[test]
+fn the_guard_holds_the_fr3_on_the_workspace_s_face() {
+    use afs_shared::robot_guard::{PlaneAxis, Trip};
+    let mut limits = roomy();
+    limits.workspace_m[0] = [-0.15, 0.008];
+    let run = press_the_wall(1e4, 0.005, 0.0, limits);
+    let Some((Trip::Workspace { axis, .. }, hold)) = run.tripped else {
+        panic!("no workspace trip: {:?}", run.tripped);
+    };
+    assert_eq!(axis, PlaneAxis::X);
+    assert_eq!(hold.position_m.x, 0.008);
+    assert!(
+        (run.state.position_m.x - 0.008).abs() < 5e-4,
+        "{:?}",
+        run.state
+    );
+}
+
+/// A contact force above the limit (3.75 N against 3 N, at the first cycle) trips the guard,
+/// which holds the pose where it tripped: the force falls to the stiffnesses in series,
+/// `F₀ k_h/(k_h + k_e)` (docs/franka.md, *The guard*), here with the hold's k_h along y on
+/// 10 kN/m, to 1e-6, and the normal offset stays at the hold pose's.
+#[test]
+fn the_guard_s_force_trip_relaxes_the_contact_on_the_fr3() {
+    use afs_shared::robot_guard::Trip;
+    let k_e = 1e4;
+    let mut limits = roomy();
+    limits.contact_force_n = 3.0;
+    let run = press_the_wall(k_e, 0.0, 0.0, limits);
+    let Some((Trip::ContactForce { force_n, .. }, hold)) = run.tripped else {
+        panic!("no force trip: {:?}", run.tripped);
+    };
+    assert!((force_n - 1.5 * preload()).abs() < 1e-9, "{force_n}");
+    let k_h = run.stiffness.y;
+    let want = force_n * k_h / (k_h + k_e);
+    let got = run.forces[2999];
+    assert!(
+        (got - want).abs() < 1e-6 * want,
+        "{got} N, closed form {want} N (k_h {k_h} N/m)"
+    );
+    assert!(
+        (run.state.normal_m - hold.normal_m).abs() < 1e-4,
+        "{:?}",
+        run.state
+    );
 }

@@ -28,6 +28,7 @@ pub mod nan;
 pub mod plant;
 pub mod probe;
 pub mod rdt;
+pub mod robot_cycle;
 pub mod robot_guard;
 pub mod scenario;
 pub mod sensor;
