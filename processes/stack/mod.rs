@@ -3,8 +3,9 @@
 //! `afs chaos` both say of a running stack ([`Timeline`] of a restart, [`Footprint`]). It sits
 //! below both: neither imports the other for it.
 
-mod footprint;
 #[doc(hidden)]
+pub mod fci;
+mod footprint;
 pub mod robot;
 mod timeline;
 
@@ -417,10 +418,12 @@ pub fn load_stack(opts: &RunOptions) -> Result<StackFile> {
     opts.sim.apply(&mut s.sim)?;
     s.check()?;
     if let Some(r) = &s.robot {
+        let answer = fci::preflight(r)?;
         bail!(
-            "[robot] kind = \"{}\" at {}: the table is valid, but the servo does not drive a robot yet (issue 48, docs/franka.md); remove [robot] to run the simulated world",
+            "[robot] kind = \"{}\" at {}: the robot answered (FCI server version {}), but the servo does not drive a robot yet (issue 48, docs/franka.md); remove [robot] to run the simulated world",
             r.kind,
-            r.address
+            r.address,
+            answer.server_version
         );
     }
     Ok(s)

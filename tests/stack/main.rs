@@ -315,11 +315,15 @@ fn bad_input_is_refused_clearly() {
     .unwrap();
     let bare = dir.join("bare.toml");
     std::fs::write(&bare, "[servo]\ninertia_feedforward = false\n").unwrap();
-    // A [robot] table: a tool transform that is not rigid is named; a valid table is refused
-    // because the servo does not drive a robot yet.
+    // A [robot] table: a tool transform that is not rigid is named; a valid table naming a
+    // loopback port where nothing listens is refused because the robot does not answer.
+    let closed = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap();
     let robot = |tip: &str| {
         format!(
-            "{}\n[robot]\nkind = \"franka\"\naddress = \"127.0.0.1\"\n[robot.task_frame]\n\
+            "{}\n[robot]\nkind = \"franka\"\naddress = \"{closed}\"\n[robot.task_frame]\n\
              origin_m = [0.45, 0.0, 0.2]\nx_axis = [1.0, 0.0, 0.0]\nnormal = [0.0, 0.0, 1.0]\n\
              [robot.tool]\nflange_to_tip = [{tip}]\nmass_kg = 0.7\n",
             afs::stack::DEFAULT_STACK
@@ -408,7 +412,7 @@ fn bad_input_is_refused_clearly() {
                 "--config".into(),
                 robot_ok.display().to_string(),
             ],
-            "the servo does not drive a robot yet",
+            "the robot does not answer",
         ),
         (
             vec!["run".into(), "--rate-hz".into(), "0".into()],
