@@ -18,6 +18,7 @@ pub mod hist;
 pub mod ipc;
 pub mod observe;
 pub mod procfs;
+pub mod robot;
 pub mod rt;
 pub mod stack;
 pub mod supervisor;

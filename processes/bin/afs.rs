@@ -283,10 +283,12 @@ enum Command {
     /// Foxglove client on the live view (their wake p99 ratio). link: a servo sample's age on
     /// arrival on one host and across the link board to a second prefix, an estimator request's
     /// round trip across it, the servo's wake latency with the link and without (docs/link.md;
-    /// needs afs-link, not part of all).
+    /// needs afs-link, not part of all). world: MuJoCo's step against the built-in plant's
+    /// (docs/mujoco.md). robot: afs's FCI client holding the robot of --config's [robot] table,
+    /// from a state received to its command sent (docs/franka.md; not part of all).
     /// Writes .hgrm histograms and SVG percentile plots into --out.
     Bench {
-        /// hop, loop, stack, link or all (hop, loop and stack).
+        /// hop, loop, stack, link, world, robot or all (hop, loop and stack).
         #[arg(value_enum, default_value = "all")]
         part: afs::tools::bench::Part,
         /// Seconds of measurement per part (stack: this much without and with the hog).
@@ -298,6 +300,9 @@ enum Command {
         /// Prefix of the benchmark's shared memory (suffixed per part).
         #[arg(long, default_value = "bench")]
         prefix: String,
+        /// robot: a stack file with a [robot] table (docs/franka.md).
+        #[arg(long)]
+        config: Option<PathBuf>,
         /// Print the report as one JSON object.
         #[arg(long)]
         json: bool,
@@ -437,6 +442,7 @@ fn run() -> Result<ExitCode> {
             duration,
             out,
             prefix,
+            config,
             json,
         } => {
             let stop = afs::boards::stop_flag()?;
@@ -445,6 +451,7 @@ fn run() -> Result<ExitCode> {
                 duration_s: duration,
                 out,
                 prefix,
+                config,
             };
             let report = afs::tools::bench::run(&opts, &stop)?;
             print(&report, json)?;

@@ -109,36 +109,83 @@ impl ArmCycle {
         force_valid: bool,
         dt_s: f64,
     ) -> CycleOutput {
-        let s = self.plane.planar(
+        let s = self.planar(arm);
+        let force = force_valid.then(|| Vector3::new(wrench.force.x, wrench.force.y, 0.0));
+        let tripped = self.guard.check(&s, force.as_ref());
+        if let Some((_, pose)) = tripped {
+            return self.hold_planar(arm, &s, &pose, tripped, dt_s);
+        }
+        let out = servo.step_task(
+            &TaskInput {
+                position_m: s.position_m,
+                velocity_m_per_s: s.velocity_m_per_s,
+                theta_rad: s.theta_rad,
+                theta_rate_rad_per_s: s.theta_rate_rad_per_s,
+                wrench,
+                force_valid,
+            },
+            dt_s,
+        );
+        let normal_target = self.params.normal_target_m;
+        self.command(
+            arm,
+            &s,
+            out.force_n,
+            out.moment_nm,
+            normal_target,
+            tripped,
+            dt_s,
+        )
+    }
+
+    /// One cycle that holds `pose` by the hold's planar gains, without a servo (a robot
+    /// reached before any contact, or held while nothing else runs); the guard still checks
+    /// the tool's pose (there is no force), and once it trips its own pose is held instead.
+    pub fn hold_at(&mut self, arm: &ArmState, pose: &HoldPose, dt_s: f64) -> CycleOutput {
+        let s = self.planar(arm);
+        let tripped = self.guard.check(&s, None);
+        let pose = tripped.map_or(*pose, |(_, p)| p);
+        self.hold_planar(arm, &s, &pose, tripped, dt_s)
+    }
+
+    /// The tool's planar state.
+    #[must_use]
+    pub fn planar(&self, arm: &ArmState) -> PlanarState {
+        self.plane.planar(
             &arm.tool_rotation,
             &arm.tool_position_m,
             &arm.jacobian,
             &arm.dq,
-        );
-        let force = force_valid.then(|| Vector3::new(wrench.force.x, wrench.force.y, 0.0));
-        let tripped = self.guard.check(&s, force.as_ref());
-        let (f, m, normal_target) = match tripped {
-            Some((_, pose)) => {
-                let (f, m) = self.hold_force(&s, &pose);
-                (f, m, pose.normal_m)
-            }
-            None => {
-                let out = servo.step_task(
-                    &TaskInput {
-                        position_m: s.position_m,
-                        velocity_m_per_s: s.velocity_m_per_s,
-                        theta_rad: s.theta_rad,
-                        theta_rate_rad_per_s: s.theta_rate_rad_per_s,
-                        wrench,
-                        force_valid,
-                    },
-                    dt_s,
-                );
-                (out.force_n, out.moment_nm, self.params.normal_target_m)
-            }
-        };
+        )
+    }
+
+    fn hold_planar(
+        &self,
+        arm: &ArmState,
+        s: &PlanarState,
+        pose: &HoldPose,
+        tripped: Option<(Trip, HoldPose)>,
+        dt_s: f64,
+    ) -> CycleOutput {
+        let (f, m) = self.hold_force(s, pose);
+        self.command(arm, s, f, m, pose.normal_m, tripped, dt_s)
+    }
+
+    /// The torques for the planar force `f` and moment `m`, the normal held at
+    /// `normal_target` (m), limited against the last command.
+    #[allow(clippy::too_many_arguments)]
+    fn command(
+        &self,
+        arm: &ArmState,
+        s: &PlanarState,
+        f: Vector2<f64>,
+        m: f64,
+        normal_target: f64,
+        tripped: Option<(Trip, HoldPose)>,
+        dt_s: f64,
+    ) -> CycleOutput {
         let p = &self.params;
-        let w = self.plane.wrench(&s, f, m, normal_target, &p.hold);
+        let w = self.plane.wrench(s, f, m, normal_target, &p.hold);
         let (tau, null_space) = joint_torques(
             &arm.jacobian,
             &arm.mass,
@@ -151,7 +198,7 @@ impl ArmCycle {
         );
         CycleOutput {
             torque: limit_torques(&tau, &arm.last_command_nm, &p.limits, dt_s),
-            planar: s,
+            planar: *s,
             tripped,
             null_space,
         }

@@ -217,11 +217,15 @@ impl Guard {
             let [lo, hi] = self.limits.workspace_m[*a as usize];
             !(lo..=hi).contains(&pose.coordinate(*a))
         })?;
+        // A tool that crossed a face is held on it: at most a cycle's motion back. One that
+        // was never inside (the first pose checked) is held where it is: the face may be far.
         let mut hold = *pose;
-        for a in PlaneAxis::ALL {
-            let [lo, hi] = self.limits.workspace_m[a as usize];
-            let c = hold.coordinate_mut(a);
-            *c = c.clamp(lo, hi);
+        if self.last_good.is_some() {
+            for a in PlaneAxis::ALL {
+                let [lo, hi] = self.limits.workspace_m[a as usize];
+                let c = hold.coordinate_mut(a);
+                *c = c.clamp(lo, hi);
+            }
         }
         let trip = Trip::Workspace {
             axis,

@@ -60,6 +60,23 @@ fn inside_the_box_and_at_the_limit_it_lets_the_cycle_through() {
     assert_eq!(g.tripped(), None);
 }
 
+/// A tool whose first pose is outside the box (an arm started away from the task plane) trips
+/// the guard and is held where it is, not pulled to the face, which may be far.
+#[test]
+fn a_tool_that_starts_outside_the_box_is_held_where_it_is() {
+    let mut g = Guard::new(limits()).unwrap();
+    let s = at(0.0, 0.0, 0.1, 0.32);
+    let (trip, hold) = g.check(&s, None).expect("a trip");
+    assert!(matches!(
+        trip,
+        Trip::Workspace {
+            axis: PlaneAxis::Normal,
+            ..
+        }
+    ));
+    assert_eq!(hold, HoldPose::of(&s));
+}
+
 #[test]
 fn leaving_the_box_holds_on_the_face_it_crossed() {
     for (s, axis, at_m) in [
@@ -71,6 +88,7 @@ fn leaving_the_box_holds_on_the_face_it_crossed() {
         (at(0.0, 0.0, 0.1, -0.06), PlaneAxis::Normal, -0.06),
     ] {
         let mut g = Guard::new(limits()).unwrap();
+        assert_eq!(g.check(&at(0.0, 0.0, 0.1, 0.0), None), None);
         let (trip, hold) = g.check(&s, Some(&Vector3::zeros())).expect("a trip");
         let range_m = limits().workspace_m[axis as usize];
         assert_eq!(
@@ -89,6 +107,7 @@ fn leaving_the_box_holds_on_the_face_it_crossed() {
     }
     // Out on two axes: the first named, both clamped.
     let mut g = Guard::new(limits()).unwrap();
+    assert_eq!(g.check(&at(0.0, 0.0, 0.1, 0.0), None), None);
     let (trip, hold) = g.check(&at(0.3, -0.3, 0.0, 0.0), None).unwrap();
     assert!(matches!(
         trip,

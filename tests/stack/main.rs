@@ -415,6 +415,19 @@ fn bad_input_is_refused_clearly() {
             "the robot does not answer",
         ),
         (
+            vec!["bench".into(), "robot".into()],
+            "afs bench robot needs --config FILE",
+        ),
+        (
+            vec![
+                "bench".into(),
+                "robot".into(),
+                "--config".into(),
+                concat!(env!("CARGO_MANIFEST_DIR"), "/examples/stack.toml").into(),
+            ],
+            "has no [robot] table",
+        ),
+        (
             vec!["run".into(), "--rate-hz".into(), "0".into()],
             "--rate-hz 0 must be",
         ),

@@ -27,6 +27,7 @@
 
 mod hop;
 mod link;
+mod robot;
 mod stack;
 mod transport;
 mod upstream;
@@ -61,6 +62,8 @@ pub enum Part {
     /// The world's step and the servo's wake, MuJoCo against the built-in plant (not part
     /// of `all`: it needs the feature `mujoco`).
     World,
+    /// afs's FCI client holding the robot of `--config` (not part of `all`: it needs a robot).
+    Robot,
     /// Hop, loop and stack.
     All,
 }
@@ -73,12 +76,13 @@ impl Part {
             Part::Stack => "stack",
             Part::Link => "link",
             Part::World => "world",
+            Part::Robot => "robot",
             Part::All => "all",
         }
     }
 
     fn includes(self, p: Part) -> bool {
-        self == p || (self == Part::All && p != Part::Link && p != Part::World)
+        self == p || (self == Part::All && !matches!(p, Part::Link | Part::World | Part::Robot))
     }
 }
 
@@ -93,6 +97,8 @@ pub struct BenchOptions {
     pub out: PathBuf,
     /// Prefix for the shared memory of the benchmark's stacks and services.
     pub prefix: String,
+    /// A stack file with a `[robot]` table (the robot part).
+    pub config: Option<PathBuf>,
 }
 
 /// The machine the benchmark ran on.
@@ -154,6 +160,9 @@ pub struct BenchReport {
     /// The world's step and the servo's wake on MuJoCo and on the built-in plant.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub world: Option<world::WorldPart>,
+    /// afs's FCI client on a robot.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub robot: Option<robot::RobotPart>,
     /// Wall time (s).
     pub wall_s: f64,
     /// Stopped by Ctrl-C.
@@ -178,6 +187,9 @@ impl BenchReport {
         }
         if let Some(w) = &self.world {
             v.push(("world", &w.part));
+        }
+        if let Some(r) = &self.robot {
+            v.push(("robot", &r.part));
         }
         v
     }
@@ -229,7 +241,14 @@ pub fn run(opts: &BenchOptions, stop: &AtomicBool) -> Result<BenchReport> {
         .with_context(|| format!("creating {}", opts.out.display()))?;
     let t0 = Instant::now();
     let stopped = || stop.load(Ordering::Relaxed);
-    let parts = [Part::Hop, Part::Loop, Part::Stack, Part::Link, Part::World];
+    let parts = [
+        Part::Hop,
+        Part::Loop,
+        Part::Stack,
+        Part::Link,
+        Part::World,
+        Part::Robot,
+    ];
     let progress = Progress::counting(
         &format!("afs bench {}", opts.part.name()),
         parts.iter().filter(|&&p| opts.part.includes(p)).count() as u64,
@@ -255,6 +274,10 @@ pub fn run(opts: &BenchOptions, stop: &AtomicBool) -> Result<BenchReport> {
         true => Some(done(&progress, world::world_part(opts, stop)?)),
         false => None,
     };
+    let robot = match opts.part.includes(Part::Robot) && !stopped() {
+        true => Some(done(&progress, robot::robot_part(opts, stop)?)),
+        false => None,
+    };
     progress.finish();
     Ok(BenchReport {
         bench: opts.part.name().into(),
@@ -268,6 +291,7 @@ pub fn run(opts: &BenchOptions, stop: &AtomicBool) -> Result<BenchReport> {
         stack,
         link,
         world,
+        robot,
         wall_s: t0.elapsed().as_secs_f64(),
         interrupted: stopped(),
     })

@@ -1,0 +1,237 @@
+//! The servo's FCI client on a Franka FR3 (issue 48, docs/franka.md, *The FCI loop*): franka-rs
+//! connects, the arm's model comes from the robot (the URDF it serves), and each robot packet
+//! is one [`ArmCycle`]: the packet's state and the model at it in, the torques out within the
+//! cycle, clocked by the robot's packets and timed by the robot's own time field.
+//!
+//! Today the loop holds the tool where it found it ([`hold`]: the hold of `ArmCycle` without a
+//! servo), which is what `afs bench robot` measures; the thesis's controller runs through the
+//! same cycle once the sensor's samples reach it.
+
+use crate::stack::robot::RobotTable;
+use afs_shared::robot_cycle::{ArmCycle, ArmCycleParams, ArmState};
+use afs_shared::robot_guard::HoldPose;
+use afs_shared::task_plane::{Hold, Jacobian, Joints, MassMatrix, TorqueLimits, planar_gains};
+use anyhow::{Context, Result, anyhow};
+use franka::model::{Frame, Model};
+use franka::{
+    FciVersion, RealtimeConfig, Robot, RobotOptions, RobotState, Torques, VersionPolicy,
+    motion_finished,
+};
+use hdrhistogram::Histogram;
+use nalgebra::{Matrix3, Vector3};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+/// FCI's cycle (s).
+pub const CYCLE_S: f64 = 1e-3;
+
+/// The impedance that holds the normal, the tilts and the null space, and the planar axes'
+/// bandwidth (Hz) and damping ratio: docs/franka.md, *The loop closed on the FR3's model*.
+pub const HOLD: Hold = Hold {
+    normal_stiffness_n_per_m: 800.0,
+    normal_damping_n_s_per_m: 60.0,
+    tilt_stiffness_nm_per_rad: 40.0,
+    tilt_damping_nm_s_per_rad: 2.0,
+    null_stiffness_nm_per_rad: 4.0,
+    null_damping_nm_s_per_rad: 0.8,
+};
+/// The planar axes' bandwidth (Hz), held to the sampling's limit by `planar_gains`.
+pub const PLANAR_BANDWIDTH_HZ: f64 = 10.0;
+
+/// An FR3 reached over FCI, with its model and afs's tool.
+pub struct Fr3 {
+    robot: Robot,
+    model: Model,
+    /// Flange to tool tip, column-major.
+    tool: [f64; 16],
+    /// The tool's mass (kg) and its centre of mass in the flange frame (m): half way to the tip.
+    load: (f64, [f64; 3]),
+}
+
+/// The identity, column-major.
+const IDENTITY: [f64; 16] = [
+    1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0,
+];
+
+impl Fr3 {
+    /// Connects to the robot of `table` (FCI version 10 exactly), loads its model and tells it
+    /// the tool's mass (`SetLoad`, the centre of mass half way to the tip, no inertia).
+    ///
+    /// # Errors
+    /// The robot does not answer, refuses, or will not serve its model or take the load.
+    pub fn connect(table: &RobotTable) -> Result<Self> {
+        super::stack::fci::preflight(table)?;
+        let options = RobotOptions::new(RealtimeConfig::Ignore)
+            .with_version(VersionPolicy::Exact(FciVersion::V10));
+        let robot = Robot::with_options(&table.address, options)
+            .map_err(|e| anyhow!("[robot] address = \"{}\": {e}", table.address))?;
+        let model = robot
+            .load_model()
+            .map_err(|e| anyhow!("[robot] the robot did not serve its model: {e}"))?;
+        let tool = table.tool.flange_to_tip;
+        let com = [tool[12] / 2.0, tool[13] / 2.0, tool[14] / 2.0];
+        let mass = table.tool.mass_kg;
+        robot
+            .set_load(mass, com, [0.0; 9])
+            .map_err(|e| anyhow!("[robot] the robot refused the tool's load ({mass} kg): {e}"))?;
+        Ok(Self {
+            robot,
+            model,
+            tool,
+            load: (mass, com),
+        })
+    }
+
+    /// The arm's state and the model at it for one packet (the tool as afs's `[robot.tool]`,
+    /// the load as set). Allocates nothing.
+    #[must_use]
+    pub fn arm_state(&self, s: &RobotState) -> ArmState {
+        let m = &self.model;
+        let (mass, com) = self.load;
+        let pose = m.pose_q(Frame::EndEffector, &s.q, &self.tool, &IDENTITY);
+        ArmState {
+            q: Joints::from(s.q),
+            dq: Joints::from(s.dq),
+            last_command_nm: Joints::from(s.tau_J_d),
+            tool_rotation: Matrix3::from_fn(|i, j| pose[j * 4 + i]),
+            tool_position_m: Vector3::new(pose[12], pose[13], pose[14]),
+            jacobian: Jacobian::from_column_slice(&m.zero_jacobian_q(
+                Frame::EndEffector,
+                &s.q,
+                &self.tool,
+                &IDENTITY,
+            )),
+            mass: MassMatrix::from_column_slice(&m.mass_q(&s.q, &[0.0; 9], mass, &com)),
+            coriolis: Joints::from(m.coriolis_q(
+                &s.q,
+                &s.dq,
+                &[0.0; 9],
+                mass,
+                &com,
+                &[0.0, 0.0, -9.81],
+            )),
+        }
+    }
+}
+
+/// What a hold measured.
+#[derive(Debug)]
+pub struct HoldRun {
+    /// From a state received to its torque sent (ns).
+    pub state_to_command_ns: Histogram<u64>,
+    /// Cycles run (packets answered).
+    pub cycles: u64,
+    /// The robot's time over the run (s).
+    pub robot_time_s: f64,
+    /// Robot cycles with no command from afs: the robot's time steps beyond one cycle.
+    pub missed_cycles: u64,
+    /// The robot's command success rate at the end (0–1).
+    pub command_success_rate: f64,
+    /// The largest planar distance from the held pose (m), and θ's (rad).
+    pub drift_m: f64,
+    /// The largest |θ − θ₀| (rad).
+    pub drift_rad: f64,
+    /// Cycles in which the torque-rate limit cut a joint.
+    pub rate_limited_cycles: u64,
+    /// Why the guard tripped, if it did.
+    pub trip: Option<String>,
+    /// Wall time of the loop (s).
+    pub wall_s: f64,
+    /// Where the tool was held: x, y (m), θ (rad) and the normal offset (m) in the task plane.
+    pub start: [f64; 4],
+}
+
+/// Holds the tool of `table` where it is for `seconds` of the robot's time (or until `stop`),
+/// through [`ArmCycle::hold_at`], and leaves through FCI's own finish.
+///
+/// # Errors
+/// The connection, or the robot ending the motion (its reason named).
+pub fn hold(table: &RobotTable, seconds: f64, stop: &AtomicBool) -> Result<HoldRun> {
+    let fr3 = Fr3::connect(table)?;
+    let first = fr3
+        .robot
+        .read_once()
+        .map_err(|e| anyhow!("[robot] no state: {e}"))?;
+    let arm0 = fr3.arm_state(&first);
+    let plane = table.plane()?;
+    let inertia = plane
+        .planar_inertia(&arm0.jacobian, &arm0.mass)
+        .context("the arm starts at a singularity: move it to a pose away from one")?;
+    let gains = planar_gains(&inertia, PLANAR_BANDWIDTH_HZ, 1.0, CYCLE_S)
+        .context("the arm's planar inertia is not finite and positive")?;
+    let mut cycle = ArmCycle::new(
+        plane,
+        ArmCycleParams {
+            hold: HOLD,
+            posture: arm0.q,
+            limits: TorqueLimits::fr3(),
+            normal_target_m: 0.0,
+            guard_gains: gains,
+        },
+        table.guard()?,
+    );
+    let s0 = cycle.planar(&arm0);
+    let pose = HoldPose {
+        position_m: s0.position_m,
+        theta_rad: s0.theta_rad,
+        normal_m: s0.normal_m,
+    };
+    let mut run = HoldRun {
+        state_to_command_ns: crate::hist::new()?,
+        cycles: 0,
+        robot_time_s: 0.0,
+        missed_cycles: 0,
+        command_success_rate: 0.0,
+        drift_m: 0.0,
+        drift_rad: 0.0,
+        rate_limited_cycles: 0,
+        trip: None,
+        wall_s: 0.0,
+        start: [s0.position_m.x, s0.position_m.y, s0.theta_rad, s0.normal_m],
+    };
+    let mut trip = None;
+    let wall = Instant::now();
+    let mut control = fr3
+        .robot
+        .start_torque_control()
+        .map_err(|e| anyhow!("[robot] torque control refused: {e}"))?;
+    loop {
+        let (state, period) = control
+            .read_once()
+            .map_err(|e| anyhow!("[robot] the motion ended: {e}"))?;
+        let received = Instant::now();
+        let steps = (period.as_secs_f64() / CYCLE_S).round() as u64;
+        run.missed_cycles += steps.saturating_sub(1);
+        run.robot_time_s += period.as_secs_f64();
+        let arm = fr3.arm_state(&state);
+        let out = cycle.hold_at(&arm, &pose, CYCLE_S);
+        let last = run.robot_time_s >= seconds || stop.load(Ordering::Relaxed);
+        let torques = Torques::new(out.torque.torque_nm.into());
+        let sent = if last {
+            control.write_once(&motion_finished(torques))
+        } else {
+            control.write_once(&torques)
+        };
+        crate::hist::record(
+            &mut run.state_to_command_ns,
+            received.elapsed().as_nanos() as u64,
+        );
+        sent.map_err(|e| anyhow!("[robot] the command was refused: {e}"))?;
+        run.cycles += 1;
+        run.command_success_rate = state.control_command_success_rate;
+        run.drift_m = run
+            .drift_m
+            .max((out.planar.position_m - pose.position_m).norm());
+        run.drift_rad = run
+            .drift_rad
+            .max((out.planar.theta_rad - pose.theta_rad).abs());
+        run.rate_limited_cycles += u64::from(out.torque.rate_limited != 0);
+        trip = trip.or(out.tripped.map(|(t, _)| t));
+        if last {
+            break;
+        }
+    }
+    run.wall_s = wall.elapsed().as_secs_f64();
+    run.trip = trip.map(|t| t.to_string());
+    Ok(run)
+}
