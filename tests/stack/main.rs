@@ -415,19 +415,6 @@ fn bad_input_is_refused_clearly() {
             "the robot does not answer",
         ),
         (
-            vec!["bench".into(), "robot".into()],
-            "afs bench robot needs --config FILE",
-        ),
-        (
-            vec![
-                "bench".into(),
-                "robot".into(),
-                "--config".into(),
-                concat!(env!("CARGO_MANIFEST_DIR"), "/examples/stack.toml").into(),
-            ],
-            "has no [robot] table",
-        ),
-        (
             vec!["run".into(), "--rate-hz".into(), "0".into()],
             "--rate-hz 0 must be",
         ),
@@ -463,6 +450,25 @@ fn bad_input_is_refused_clearly() {
         leftovers(&missing_prefix)
     );
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `afs bench robot` without a robot to hold: one line naming what to give, exit 2.
+#[test]
+fn bench_robot_without_a_robot_is_refused() {
+    let stack = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/stack.toml");
+    for (args, needle) in [
+        (
+            vec!["bench", "robot"],
+            "afs bench robot needs --config FILE",
+        ),
+        (
+            vec!["bench", "robot", "--config", stack],
+            "has no [robot] table",
+        ),
+    ] {
+        let out = afs().args(&args).output().unwrap();
+        assert_refused(&out, &args, needle);
+    }
 }
 
 /// SIGKILL of the sensor, then of the servo, in a running surface-tracking stack: the
