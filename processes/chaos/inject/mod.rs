@@ -34,7 +34,7 @@ const REQUEST_WAIT: Duration = Duration::from_secs(15);
 #[doc(hidden)]
 pub const REQUEST_KILL_DELAY: Duration = Duration::from_millis(50);
 /// Most wall time to wait for a faulted board to be back.
-const RECOVERY_WAIT: Duration = Duration::from_secs(20);
+pub const RECOVERY_WAIT: Duration = Duration::from_secs(20);
 /// How often a due probe is asked for again while the servo tracks without starting it (a
 /// restarted servo has forgotten the request; the request lapses by itself once a probe
 /// starts).
@@ -134,6 +134,16 @@ impl Injector {
     /// No fault in progress.
     pub fn idle(&self) -> bool {
         matches!(self.phase, Phase::Idle)
+    }
+
+    /// A faulted board is on its way back: frozen until its stall policy kills it, or killed
+    /// and not yet serving again. The supervisor lets it come back before it ends a run whose
+    /// scenario is over ([`RECOVERY_WAIT`] at most).
+    pub fn bringing_back(&self) -> bool {
+        matches!(
+            self.phase,
+            Phase::Frozen { .. } | Phase::Recovering { .. } | Phase::LinkRecovering { .. }
+        )
     }
 
     /// Every planned fault injected and over.

@@ -218,6 +218,9 @@ impl Supervisor {
         }
         let tty = std::io::stderr().is_terminal();
         let limit = self.wall_limit;
+        // When the servo finished its scenario (the run ends once no faulted board is on its
+        // way back).
+        let mut finished: Option<Instant> = None;
         loop {
             std::thread::sleep(Duration::from_millis(5));
             if stop.load(Ordering::Relaxed) {
@@ -230,10 +233,28 @@ impl Supervisor {
             // iceoryx2 has cleaned them; without a change this compares a counter.
             let _ = self.ports.status.update_connections();
             let _ = self.ports.command.update_connections();
-            self.inject();
+            // Past the scenario's end, only a fault already under way goes on: a board frozen
+            // or killed near the end is let back (its recovery is the fault's record), and no
+            // other fault starts.
+            let recovering = self
+                .injector
+                .as_ref()
+                .is_some_and(crate::chaos::Injector::bringing_back);
+            if finished.is_none() || recovering {
+                self.inject();
+            }
             if self.watch_children() {
-                self.end = Some(RunEnd::Finished);
-                break;
+                finished = Some(Instant::now());
+            }
+            if let Some(at) = finished {
+                let recovering = self
+                    .injector
+                    .as_ref()
+                    .is_some_and(crate::chaos::Injector::bringing_back);
+                if !recovering || at.elapsed() > crate::chaos::RECOVERY_WAIT {
+                    self.end = Some(RunEnd::Finished);
+                    break;
+                }
             }
             let servo_failed = self
                 .procs
