@@ -218,3 +218,7 @@ impl ArmCycle {
         (f, m)
     }
 }
+
+#[cfg(test)]
+#[path = "robot_cycle_tests.rs"]
+mod tests;
