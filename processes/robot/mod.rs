@@ -139,14 +139,41 @@ pub struct HoldRun {
     pub wall_s: f64,
     /// Where the tool was held: x, y (m), θ (rad) and the normal offset (m) in the task plane.
     pub start: [f64; 4],
+    /// What the real-time set-up of the loop's thread achieved.
+    pub realtime: crate::rt::RtReport,
 }
 
+/// The loop's SCHED_FIFO priority: the servo board's. The loop waits on the robot's packets
+/// (a blocking receive), so it never spins.
+pub const PRIORITY: u8 = 80;
+
 /// Holds the tool of `table` where it is for `seconds` of the robot's time (or until `stop`),
-/// through [`ArmCycle::hold_at`], and leaves through FCI's own finish.
+/// through [`ArmCycle::hold_at`], and leaves through FCI's own finish. The loop runs in a
+/// thread of its own at SCHED_FIFO ([`PRIORITY`]) with its memory locked where the system
+/// allows it; what it refused is in [`HoldRun::realtime`].
 ///
 /// # Errors
 /// The connection, or the robot ending the motion (its reason named).
 pub fn hold(table: &RobotTable, seconds: f64, stop: &AtomicBool) -> Result<HoldRun> {
+    std::thread::scope(|s| {
+        std::thread::Builder::new()
+            .name("afs-fci".into())
+            .spawn_scoped(s, || {
+                let rt = crate::rt::setup(PRIORITY, true, None);
+                for w in &rt.warnings {
+                    eprintln!("afs: warning: {w}");
+                }
+                let mut run = hold_here(table, seconds, stop)?;
+                run.realtime = rt;
+                Ok(run)
+            })
+            .context("starting the FCI loop's thread")?
+            .join()
+            .map_err(|_| anyhow!("the FCI loop's thread panicked"))?
+    })
+}
+
+fn hold_here(table: &RobotTable, seconds: f64, stop: &AtomicBool) -> Result<HoldRun> {
     let fr3 = Fr3::connect(table)?;
     let first = fr3
         .robot
@@ -188,6 +215,7 @@ pub fn hold(table: &RobotTable, seconds: f64, stop: &AtomicBool) -> Result<HoldR
         trip: None,
         wall_s: 0.0,
         start: [s0.position_m.x, s0.position_m.y, s0.theta_rad, s0.normal_m],
+        realtime: crate::rt::RtReport::default(),
     };
     let mut trip = None;
     let wall = Instant::now();

@@ -38,6 +38,10 @@ pub struct RobotPart {
     pub trip: Option<String>,
     /// Where the tool was held: x, y (m), θ (rad) and the normal offset (m) in the task plane.
     pub start_in_plane: [f64; 4],
+    /// The loop's thread ran at SCHED_FIFO.
+    pub fifo: bool,
+    /// Its memory was locked.
+    pub mlocked: bool,
     /// The peer figure: pylibfranka's own torque loop on the same robot right after
     /// (examples/python/fci_peer_loop.py's report, or why it was skipped).
     pub peer_pylibfranka: serde_json::Value,
@@ -121,6 +125,8 @@ pub(super) fn robot_part(opts: &BenchOptions, stop: &AtomicBool) -> Result<Robot
         rate_limited_cycles: run.rate_limited_cycles,
         trip: run.trip,
         start_in_plane: run.start,
+        fifo: run.realtime.fifo,
+        mlocked: run.realtime.mlocked,
         peer_pylibfranka,
         part,
     })
