@@ -13,6 +13,7 @@ mod observe_topics;
 mod observe_view;
 mod rt;
 mod stack;
+mod stack_fci;
 mod stack_robot;
 mod supervisor_policy;
 mod tools_experiment;
