@@ -214,14 +214,7 @@ fn close_the_loop(gains: &Gains, cycles: usize) -> (afs_shared::task_plane::Plan
     let ready = Q::from(READY);
     let (r0, p0) = flange_pose(&m, &ready);
     let plane = TaskPlane::new(Matrix3::identity(), p0, r0).expect("rotations");
-    let hold = Hold {
-        normal_stiffness_n_per_m: 800.0,
-        normal_damping_n_s_per_m: 60.0,
-        tilt_stiffness_nm_per_rad: 40.0,
-        tilt_damping_nm_s_per_rad: 2.0,
-        null_stiffness_nm_per_rad: 4.0,
-        null_damping_nm_s_per_rad: 0.8,
-    };
+    let hold = Hold::FR3;
     let target = Vector2::new(0.03, -0.02);
     let limits = TorqueLimits::fr3();
     let dt = 1e-3;
@@ -419,14 +412,7 @@ fn press_the_wall(
     let mut cycle = ArmCycle::new(
         plane,
         ArmCycleParams {
-            hold: Hold {
-                normal_stiffness_n_per_m: 800.0,
-                normal_damping_n_s_per_m: 60.0,
-                tilt_stiffness_nm_per_rad: 40.0,
-                tilt_damping_nm_s_per_rad: 2.0,
-                null_stiffness_nm_per_rad: 4.0,
-                null_damping_nm_s_per_rad: 0.8,
-            },
+            hold: Hold::FR3,
             posture: ready,
             limits: TorqueLimits::fr3(),
             normal_target_m: 0.0,

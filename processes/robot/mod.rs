@@ -25,16 +25,6 @@ use std::time::Instant;
 /// FCI's cycle (s).
 pub const CYCLE_S: f64 = 1e-3;
 
-/// The impedance that holds the normal, the tilts and the null space, and the planar axes'
-/// bandwidth (Hz) and damping ratio: docs/franka.md, *The loop closed on the FR3's model*.
-pub const HOLD: Hold = Hold {
-    normal_stiffness_n_per_m: 800.0,
-    normal_damping_n_s_per_m: 60.0,
-    tilt_stiffness_nm_per_rad: 40.0,
-    tilt_damping_nm_s_per_rad: 2.0,
-    null_stiffness_nm_per_rad: 4.0,
-    null_damping_nm_s_per_rad: 0.8,
-};
 /// The planar axes' bandwidth (Hz), held to the sampling's limit by `planar_gains`.
 pub const PLANAR_BANDWIDTH_HZ: f64 = 10.0;
 
@@ -189,7 +179,7 @@ fn hold_here(table: &RobotTable, seconds: f64, stop: &AtomicBool) -> Result<Hold
     let mut cycle = ArmCycle::new(
         plane,
         ArmCycleParams {
-            hold: HOLD,
+            hold: Hold::FR3,
             posture: arm0.q,
             limits: TorqueLimits::fr3(),
             normal_target_m: 0.0,

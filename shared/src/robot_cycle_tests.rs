@@ -17,14 +17,7 @@ fn cycle() -> ArmCycle {
     ArmCycle::new(
         plane,
         ArmCycleParams {
-            hold: Hold {
-                normal_stiffness_n_per_m: 800.0,
-                normal_damping_n_s_per_m: 60.0,
-                tilt_stiffness_nm_per_rad: 40.0,
-                tilt_damping_nm_s_per_rad: 2.0,
-                null_stiffness_nm_per_rad: 4.0,
-                null_damping_nm_s_per_rad: 0.8,
-            },
+            hold: Hold::FR3,
             posture: Joints::zeros(),
             limits: TorqueLimits {
                 torque_nm: Joints::repeat(1e9),

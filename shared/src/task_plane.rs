@@ -309,6 +309,20 @@ pub struct Hold {
     pub null_damping_nm_s_per_rad: f64,
 }
 
+impl Hold {
+    /// The hold measured on the FR3's model (docs/franka.md, *The loop closed on the FR3's
+    /// model*): 800 N/m and 60 N·s/m along the normal, 40 N·m/rad and 2 N·m·s/rad in tilt,
+    /// 4 N·m/rad and 0.8 N·m·s/rad in the null space.
+    pub const FR3: Hold = Hold {
+        normal_stiffness_n_per_m: 800.0,
+        normal_damping_n_s_per_m: 60.0,
+        tilt_stiffness_nm_per_rad: 40.0,
+        tilt_damping_nm_s_per_rad: 2.0,
+        null_stiffness_nm_per_rad: 4.0,
+        null_damping_nm_s_per_rad: 0.8,
+    };
+}
+
 /// The joint torques for wrench `wrench` (base frame) at the tool, plus the null-space
 /// impedance toward `posture` and the Coriolis torque `coriolis`; `false` in the second slot
 /// when `J M⁻¹ Jᵀ` is singular (the arm at a singularity: no null-space term is added).

@@ -114,14 +114,7 @@ fn the_task_plane_cycle_allocates_nothing() {
     use nalgebra::{Matrix3, Vector2, Vector3};
     let plane = TaskPlane::new(Matrix3::identity(), Vector3::zeros(), Matrix3::identity())
         .expect("rotations");
-    let hold = Hold {
-        normal_stiffness_n_per_m: 800.0,
-        normal_damping_n_s_per_m: 60.0,
-        tilt_stiffness_nm_per_rad: 40.0,
-        tilt_damping_nm_s_per_rad: 2.0,
-        null_stiffness_nm_per_rad: 4.0,
-        null_damping_nm_s_per_rad: 0.8,
-    };
+    let hold = Hold::FR3;
     let j = Jacobian::from_fn(|r, c| ((r * 7 + c) as f64 * 0.7).sin());
     let a = MassMatrix::from_fn(|r, c| ((r * 7 + c) as f64 * 1.3).cos());
     let mass = a * a.transpose() + MassMatrix::identity();
