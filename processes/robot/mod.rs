@@ -13,10 +13,7 @@ use afs_shared::robot_guard::HoldPose;
 use afs_shared::task_plane::{Hold, Jacobian, Joints, MassMatrix, TorqueLimits, planar_gains};
 use anyhow::{Context, Result, anyhow};
 use franka::model::{Frame, Model};
-use franka::{
-    FciVersion, RealtimeConfig, Robot, RobotOptions, RobotState, Torques, VersionPolicy,
-    motion_finished,
-};
+use franka::{Robot, RobotState, Torques, motion_finished};
 use hdrhistogram::Histogram;
 use nalgebra::{Matrix3, Vector3};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -44,17 +41,14 @@ const IDENTITY: [f64; 16] = [
 ];
 
 impl Fr3 {
-    /// Connects to the robot of `table` (FCI version 10 exactly), loads its model and tells it
+    /// Connects to the robot of `table` ([`crate::stack::fci::connect`]: FCI version 10
+    /// exactly, each failure one line), loads its model and tells it
     /// the tool's mass (`SetLoad`, the centre of mass half way to the tip, no inertia).
     ///
     /// # Errors
     /// The robot does not answer, refuses, or will not serve its model or take the load.
     pub fn connect(table: &RobotTable) -> Result<Self> {
-        super::stack::fci::preflight(table)?;
-        let options = RobotOptions::new(RealtimeConfig::Ignore)
-            .with_version(VersionPolicy::Exact(FciVersion::V10));
-        let robot = Robot::with_options(&table.address, options)
-            .map_err(|e| anyhow!("[robot] address = \"{}\": {e}", table.address))?;
+        let robot = crate::stack::fci::connect(table)?;
         let model = robot
             .load_model()
             .map_err(|e| anyhow!("[robot] the robot did not serve its model: {e}"))?;

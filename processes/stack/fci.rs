@@ -16,19 +16,25 @@ pub struct RobotAnswer {
     pub q: [f64; 7],
 }
 
-/// Connects to the robot of `table`, reads one state and disconnects. The connection gives up
-/// after franka-rs's 1-s connect timeout.
+/// Connects to the robot of `table` as the servo's client: FCI version 10 exactly (afs drives
+/// an FR3 only, no fall-back to a Panda's 5), no real-time kernel asked of franka-rs (the
+/// loop's thread asks for its own priority). Gives up after franka-rs's 1-s connect timeout.
 ///
 /// # Errors
-/// One line naming `[robot] address` and what went wrong: no answer, another FCI version, a
-/// refusal, or no state.
-pub fn preflight(table: &RobotTable) -> Result<RobotAnswer> {
-    let address = &table.address;
-    // The pre-flight needs no real-time kernel (the servo's loop will ask for one), and afs
-    // drives an FR3 only: version 10 exactly, no fall-back to a Panda's 5.
+/// One line naming `[robot] address`: no answer, another FCI version, or a refusal.
+pub fn connect(table: &RobotTable) -> Result<Robot> {
     let options = RobotOptions::new(RealtimeConfig::Ignore)
         .with_version(VersionPolicy::Exact(FciVersion::V10));
-    let robot = Robot::with_options(address, options).map_err(|e| refusal(address, &e))?;
+    Robot::with_options(&table.address, options).map_err(|e| refusal(&table.address, &e))
+}
+
+/// Connects to the robot of `table` ([`connect`]), reads one state and disconnects.
+///
+/// # Errors
+/// [`connect`]'s, or one line saying the robot sent no state.
+pub fn preflight(table: &RobotTable) -> Result<RobotAnswer> {
+    let address = &table.address;
+    let robot = connect(table)?;
     let state = robot.read_once().map_err(|e| {
         anyhow!(
             "[robot] address = \"{address}\": the robot took the connection but sent no state ({e}); check that nothing blocks its UDP packets (a firewall) and that FCI is enabled in Desk"

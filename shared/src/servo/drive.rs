@@ -7,12 +7,12 @@
 //! velocity and the contact force in the plane. The drive turns the set-point into the arm's
 //! command and reads the tool back.
 
-use crate::arm::{Arm, Elbow, JointServo, Pose};
+use crate::arm::{Arm, Elbow, JointServo};
 use crate::hybrid::HybridCommand;
 use crate::math::Vec2;
 use crate::sensor::Wrench;
 use crate::task_plane::PlanarGains;
-use nalgebra::{Vector2, Vector3};
+use nalgebra::{Matrix2, Vector2, Vector3};
 
 /// The thesis's two-link arm: the set-point's inverse kinematics, tracked by PID joint servos.
 #[derive(Debug, Clone)]
@@ -147,15 +147,16 @@ impl TaskDrive {
 }
 
 impl TwoLink {
-    /// The joint torques for the set-point `cmd`, the arm at `pose` and rates `qd`; also
-    /// whether the set-point was out of reach (the last reachable one held).
+    /// The joint torques for the set-point `cmd`, the arm at `q` with rates `qd` and the
+    /// Jacobian `j` there (which carries the normal forces); also whether the set-point was out
+    /// of reach (the last reachable one held).
     #[allow(clippy::too_many_arguments)]
     pub(super) fn torque(
         &mut self,
         cmd: &HybridCommand,
         q: Vector2<f64>,
         qd: Vector2<f64>,
-        pose: &Pose,
+        j: &Matrix2<f64>,
         normal: &NormalForces,
         inertia_feedforward: bool,
         dt: f64,
@@ -188,8 +189,6 @@ impl TwoLink {
         } else {
             Vector2::zeros()
         };
-        // The Jacobian at the measured pose carries the normal forces.
-        let j = self.arm.jacobian_at(pose);
         if let Some(p) = normal.preload {
             feedforward -= j.transpose() * p;
         }

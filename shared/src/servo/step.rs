@@ -29,8 +29,9 @@ impl ServoCore {
         let pose = two.arm.pose(inp.q);
         let tip = two.arm.forward_at(&pose);
         // The Jacobian at the measured pose: the tip's velocity (the contact mode's damping,
-        // the tuner's tangential velocity, the drift trigger).
-        let tip_velocity = two.arm.jacobian_at(&pose) * inp.qd;
+        // the tuner's tangential velocity, the drift trigger) and the normal forces' torques.
+        let j = two.arm.jacobian_at(&pose);
+        let tip_velocity = j * inp.qd;
         let force = if valid {
             to_plane(pose.s12, pose.c12, inp.wrench.tared(self.tare))
         } else {
@@ -50,7 +51,7 @@ impl ServoCore {
             &planned.cmd,
             inp.q,
             inp.qd,
-            &pose,
+            &j,
             &normal,
             inertia_feedforward,
             dt,
