@@ -111,7 +111,7 @@ pub struct HoldRun {
     pub missed_cycles: u64,
     /// The robot's command success rate at the end (0–1).
     pub command_success_rate: f64,
-    /// The largest planar distance from the held pose (m), and θ's (rad).
+    /// The largest planar distance from the held pose (m).
     pub drift_m: f64,
     /// The largest |θ − θ₀| (rad).
     pub drift_rad: f64,
