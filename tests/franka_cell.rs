@@ -1,6 +1,7 @@
 //! afs's FCI client on franky-sim's FR3 (examples/python/fr3_cell.py, docs/franka.md, *The
-//! FCI loop*): `afs bench robot` holds the arm through the FCI loop, and `afs run` reaches the
-//! robot before it refuses to drive it. Skipped, saying why, where franky-sim is not installed
+//! FCI loop* and *The servo on the robot*): `afs bench robot` holds the arm through the FCI
+//! loop, and `afs run` drives the scenario on it with the cell's wrist sensor over RDT.
+//! Skipped, saying why, where franky-sim is not installed
 //! (examples/python/requirements-franka.txt; the test command does not install it).
 
 mod common;
@@ -26,7 +27,15 @@ fn cell() -> Option<(KillOnDrop, String)> {
     let host = format!("127.0.0.{}", 100 + std::process::id() % 100);
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/python/fr3_cell.py");
     let mut child = Command::new("python3")
-        .args([script, "--hostname", &host, "--seconds", "120"])
+        .args([
+            script,
+            "--hostname",
+            &host,
+            "--seconds",
+            "120",
+            "--rdt-port",
+            "49152",
+        ])
         .stdout(Stdio::piped())
         .spawn()
         .expect("python3 starts the cell");
@@ -47,14 +56,19 @@ fn cell() -> Option<(KillOnDrop, String)> {
     }
 }
 
-/// examples/stack-franka.toml with the cell's address.
+/// examples/stack-franka.toml with the cell's address (the robot's and the sensor's) and a
+/// prefix of this test's own.
 fn stack_file(host: &str) -> std::path::PathBuf {
     let text = std::fs::read_to_string(concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/examples/stack-franka.toml"
     ))
     .unwrap()
-    .replace("address = \"127.0.0.21\"", &format!("address = \"{host}\""));
+    .replace("127.0.0.21", host)
+    .replace(
+        "prefix = \"afs\"",
+        &format!("prefix = \"fr3cell{}\"", std::process::id()),
+    );
     let dir = std::env::temp_dir().join(format!("afs-franka-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("stack-franka.toml");
@@ -64,8 +78,9 @@ fn stack_file(host: &str) -> std::path::PathBuf {
 
 /// Two seconds of the robot's time held through the FCI loop: every packet answered (the
 /// robot's time advanced by the cycles afs ran and the ones it missed), the robot took the
-/// commands, the tool stayed within 1 mm, the guard never tripped. Then `afs run` reaches the
-/// robot and names its FCI version before it refuses to drive it.
+/// commands, the tool stayed within 1 mm, the guard never tripped. Then `afs run` drives the
+/// scenario for 3 s of the robot's time: every packet a tick, every tick's samples delivered,
+/// the sensor's records all received, the tool pressed on the cell's wall, nothing left behind.
 #[test]
 fn afs_holds_franky_sims_fr3_over_fci() {
     let Some((_cell, host)) = cell() else {
@@ -94,16 +109,42 @@ fn afs_holds_franky_sims_fr3_over_fci() {
     assert!(r["command_success_rate"].as_f64().unwrap() > 0.5, "{r}");
     assert!(r["drift_m"].as_f64().unwrap() < 1e-3, "{r}");
     assert!(r["trip"].is_null(), "{r}");
+    drives_the_scenario(&config);
+}
+
+fn drives_the_scenario(config: &std::path::Path) {
     let run = afs()
-        .arg("run")
-        .arg("--config")
-        .arg(&config)
+        .args(["run", "--duration", "3", "--json", "--config"])
+        .arg(config)
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&run.stderr);
-    assert_eq!(run.status.code(), Some(2), "{err}");
+    // The run's checks are reported, not asserted: the scenario's surface is not yet the
+    // cell's (docs/franka.md, *What is left*).
+    assert!(matches!(run.status.code(), Some(0 | 1)), "{err}");
+    let s: serde_json::Value = serde_json::from_slice(&run.stdout).expect("the run's JSON");
+    assert_eq!(s["end"], "finished", "{err}");
+    let ticks = s["loop"]["ticks"].as_u64().unwrap() + s["loop"]["misses"].as_u64().unwrap();
+    assert!(ticks.abs_diff(3000) <= 3, "{}", s["loop"]);
+    let samples = &s["samples"];
+    assert_eq!(samples["servo_lost"], 0, "{samples}");
+    assert_eq!(samples["plant_lost"], 0, "{samples}");
+    assert_eq!(samples["paired"], s["loop"]["ticks"], "{samples}");
+    let rdt = &s["sensor"]["rdt"];
+    assert_eq!(rdt["lost"], 0, "{rdt}");
+    assert!(rdt["records"].as_u64().unwrap() > 1000, "{rdt}");
+    for p in s["processes"].as_array().unwrap() {
+        assert_eq!(p["restarts"], 0, "{p}");
+    }
+    let pressed = s["faults"]["normal_force_max_n"].as_f64().unwrap();
     assert!(
-        err.contains("the robot answered (FCI server version 10)"),
-        "{err}"
+        pressed > 1.25,
+        "the tool never pressed the wall: {pressed} N"
+    );
+    assert_eq!(
+        s["cleanup"]["left"],
+        serde_json::json!([]),
+        "{}",
+        s["cleanup"]
     );
 }

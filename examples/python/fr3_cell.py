@@ -18,7 +18,10 @@ import argparse
 import logging
 import signal
 import struct
+import os
 import sys
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 
 def official_connect_reply(franka_server):
@@ -44,18 +47,55 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--hostname", required=True, help="loopback address to serve the FR3 on")
     parser.add_argument("--seconds", type=float, default=0.0, help="stop after this long (0: until killed)")
+    parser.add_argument("--rdt-port", type=int, default=0, help="serve the wrist sensor over RDT on this UDP port of --hostname (0: no sensor, no scene)")
+    parser.add_argument("--tool-length-m", type=float, default=0.16, help="flange to the tool tip's centre (m)")
+    parser.add_argument("--tip-radius-m", type=float, default=0.005, help="the tool tip's radius (m)")
+    parser.add_argument("--wall-at", type=float, nargs=2, default=[0.554, 0.007], metavar=("X", "Y"), help="a point of the wall's face (base frame, m)")
+    parser.add_argument("--wall-normal", type=float, nargs=2, default=[0.0, -1.0], metavar=("NX", "NY"), help="the wall's outward normal (towards the tool)")
+    parser.add_argument("--wall-solref", type=float, nargs=2, default=[0.02, 1.0], metavar=("TIMECONST", "DAMPRATIO"), help="the wall's MuJoCo solref (default: MuJoCo's own)")
+    parser.add_argument("--mu", type=float, default=0.3, help="Coulomb friction between the tip and the wall")
+    # Given to every supervised process by `afs run`: the stack's prefix, scenario, seed, CPU
+    # and priority. The cell uses the seed (the sensor's noise and bias); it runs at normal
+    # priority, its pace set by franky-sim's real-time loop.
+    parser.add_argument("--seed", type=int, default=1)
+    for name in ("--prefix", "--scenario", "--sim-config", "--cpu", "--priority"):
+        parser.add_argument(name, default=None)
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING, format="fr3_cell: %(levelname)s %(message)s")
     try:
         import franky_sim
+        import mujoco
         from franky_sim import franka_server
         from franky_sim.mujoco_simulator import MujocoSimulator
     except ImportError as e:
-        print(f"fr3_cell: franky-sim is not installed ({e}); pip install -r examples/python/requirements.txt", file=sys.stderr)
+        print(f"fr3_cell: franky-sim is not installed ({e}); pip install -r examples/python/requirements-franka.txt", file=sys.stderr)
         return 2
     official_connect_reply(franka_server)
     with MujocoSimulator(enable_visualization=False) as sim:
         sim.add_robot()
+        device = None
+        if args.rdt_port:
+            import fr3_scene
+            from rdt_device import RdtDevice
+
+            # The start pose puts the flange 0.625 m up, pointing down: the tip's centre is
+            # tool_length below it, and the wall stands 4 cm above the tip, below the fingers.
+            tip_z = 0.625 - args.tool_length_m
+            fr3_scene.add_tool(sim, args.tool_length_m, args.tip_radius_m)
+            fr3_scene.add_wall(sim, args.wall_at, args.wall_normal, tip_z + 0.04, args.wall_solref, args.mu)
+            sensor = fr3_scene.WristSensor(args.seed)
+            try:
+                device = RdtDevice(args.hostname, args.rdt_port)
+            except OSError as e:
+                print(f"fr3_cell: cannot serve RDT on {args.hostname}:{args.rdt_port}: {e}", file=sys.stderr)
+                return 2
+
+            def serve(s):
+                if sensor.site is None:
+                    sensor.attach(s.model, mujoco)
+                device.sample(sensor.reading(s.model, s.data, mujoco))
+
+            sim.register_post_step_callback(serve)
         with franky_sim.SimulationServer(sim, hostname_candidates=[args.hostname]) as server:
 
             def stop(*_):

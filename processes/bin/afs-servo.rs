@@ -43,6 +43,10 @@ struct Cli {
     /// wake.hdr, exec.hdr, force_age.hdr) in this directory when the run ends.
     #[arg(long)]
     histograms: Option<std::path::PathBuf>,
+    /// Drive the robot of this file's `[robot]` table (a stack file, or the table `afs run`
+    /// writes) instead of the simulated world (docs/franka.md).
+    #[arg(long)]
+    robot_config: Option<std::path::PathBuf>,
 }
 
 fn main() -> ExitCode {
@@ -74,6 +78,11 @@ fn main() -> ExitCode {
             startup_timeout_s: cli.startup_timeout,
             histograms: cli.histograms.clone(),
             main_ns,
+            robot: cli
+                .robot_config
+                .as_deref()
+                .map(afs::stack::robot::read)
+                .transpose()?,
         };
         run(&args, &stop)
     })();

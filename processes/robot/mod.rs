@@ -10,7 +10,9 @@
 use crate::stack::robot::RobotTable;
 use afs_shared::robot_cycle::{ArmCycle, ArmCycleParams, ArmState};
 use afs_shared::robot_guard::HoldPose;
-use afs_shared::task_plane::{Hold, Jacobian, Joints, MassMatrix, TorqueLimits, planar_gains};
+use afs_shared::task_plane::{
+    Hold, Jacobian, Joints, MassMatrix, PlanarGains, PlanarState, TorqueLimits, planar_gains,
+};
 use anyhow::{Context, Result, anyhow};
 use franka::model::{Frame, Model};
 use franka::{Robot, RobotState, Torques, motion_finished};
@@ -64,6 +66,12 @@ impl Fr3 {
             tool,
             load: (mass, com),
         })
+    }
+
+    /// The robot, for its motions.
+    #[must_use]
+    pub fn robot(&self) -> &Robot {
+        &self.robot
     }
 
     /// The arm's state and the model at it for one packet (the tool as afs's `[robot.tool]`,
@@ -157,36 +165,77 @@ pub fn hold(table: &RobotTable, seconds: f64, stop: &AtomicBool) -> Result<HoldR
     })
 }
 
+/// A robot ready for torque control: the FR3, where its tool started, and the cycle with the
+/// planar impedance that holds a pose (the guard's hold, and a hold without a servo).
+pub struct Session {
+    /// The arm.
+    pub fr3: Fr3,
+    /// The cycle on it.
+    pub cycle: ArmCycle,
+    /// The tool's planar state at the first packet.
+    pub start: PlanarState,
+    /// The tool's planar inertia there (kg, kg, kg·m²).
+    pub inertia: Vector3<f64>,
+    /// The planar impedance of the hold ([`PLANAR_BANDWIDTH_HZ`]).
+    pub gains: PlanarGains,
+}
+
+impl Session {
+    /// Connects ([`Fr3::connect`]), reads one state and builds the cycle of `table` there: the
+    /// null space's posture is the arm's first pose.
+    ///
+    /// # Errors
+    /// The connection, no state, an arm at a singularity, or a table that does not check.
+    pub fn open(table: &RobotTable) -> Result<Self> {
+        let fr3 = Fr3::connect(table)?;
+        let first = fr3
+            .robot
+            .read_once()
+            .map_err(|e| anyhow!("[robot] no state: {e}"))?;
+        let arm0 = fr3.arm_state(&first);
+        let plane = table.plane()?;
+        let inertia = plane
+            .planar_inertia(&arm0.jacobian, &arm0.mass)
+            .context("the arm starts at a singularity: move it to a pose away from one")?;
+        let gains = planar_gains(&inertia, PLANAR_BANDWIDTH_HZ, 1.0, CYCLE_S)
+            .context("the arm's planar inertia is not finite and positive")?;
+        let cycle = ArmCycle::new(
+            plane,
+            ArmCycleParams {
+                hold: Hold::FR3,
+                posture: arm0.q,
+                limits: TorqueLimits::fr3(),
+                normal_target_m: 0.0,
+                guard_gains: gains,
+            },
+            table.guard()?,
+        );
+        let start = cycle.planar(&arm0);
+        Ok(Self {
+            fr3,
+            cycle,
+            start,
+            inertia,
+            gains,
+        })
+    }
+
+    /// The pose the tool started at.
+    #[must_use]
+    pub fn start_pose(&self) -> HoldPose {
+        let s = &self.start;
+        HoldPose {
+            position_m: s.position_m,
+            theta_rad: s.theta_rad,
+            normal_m: s.normal_m,
+        }
+    }
+}
+
 fn hold_here(table: &RobotTable, seconds: f64, stop: &AtomicBool) -> Result<HoldRun> {
-    let fr3 = Fr3::connect(table)?;
-    let first = fr3
-        .robot
-        .read_once()
-        .map_err(|e| anyhow!("[robot] no state: {e}"))?;
-    let arm0 = fr3.arm_state(&first);
-    let plane = table.plane()?;
-    let inertia = plane
-        .planar_inertia(&arm0.jacobian, &arm0.mass)
-        .context("the arm starts at a singularity: move it to a pose away from one")?;
-    let gains = planar_gains(&inertia, PLANAR_BANDWIDTH_HZ, 1.0, CYCLE_S)
-        .context("the arm's planar inertia is not finite and positive")?;
-    let mut cycle = ArmCycle::new(
-        plane,
-        ArmCycleParams {
-            hold: Hold::FR3,
-            posture: arm0.q,
-            limits: TorqueLimits::fr3(),
-            normal_target_m: 0.0,
-            guard_gains: gains,
-        },
-        table.guard()?,
-    );
-    let s0 = cycle.planar(&arm0);
-    let pose = HoldPose {
-        position_m: s0.position_m,
-        theta_rad: s0.theta_rad,
-        normal_m: s0.normal_m,
-    };
+    let mut session = Session::open(table)?;
+    let pose = session.start_pose();
+    let s0 = session.start;
     let mut run = HoldRun {
         state_to_command_ns: crate::hist::new()?,
         cycles: 0,
@@ -203,6 +252,7 @@ fn hold_here(table: &RobotTable, seconds: f64, stop: &AtomicBool) -> Result<Hold
     };
     let mut trip = None;
     let wall = Instant::now();
+    let Session { fr3, cycle, .. } = &mut session;
     let mut control = fr3
         .robot
         .start_torque_control()

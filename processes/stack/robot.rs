@@ -182,6 +182,26 @@ impl RobotTable {
     }
 }
 
+/// The `[robot]` table of the file at `path` (a stack file, or the table alone), checked.
+///
+/// # Errors
+/// The file cannot be read, has no `[robot]` table, or the table does not check.
+pub fn read(path: &std::path::Path) -> Result<RobotTable> {
+    #[derive(Deserialize)]
+    struct WithRobot {
+        robot: Option<RobotTable>,
+    }
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| anyhow!("reading the robot's table {}: {e}", path.display()))?;
+    let file: WithRobot = toml::from_str(&text)
+        .map_err(|e| anyhow!("parsing the robot's table {}: {e}", path.display()))?;
+    let table = file
+        .robot
+        .ok_or_else(|| anyhow!("{} has no [robot] table", path.display()))?;
+    table.check()?;
+    Ok(table)
+}
+
 /// An FCI address: a host (an IP address or a name) with an optional `:port` (1 to 65535).
 #[doc(hidden)]
 pub fn check_address(address: &str) -> Result<()> {

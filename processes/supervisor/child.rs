@@ -50,6 +50,8 @@ pub struct Launch {
     pub sim_file: Option<PathBuf>,
     /// Simulated seconds (the servo's `--duration`).
     pub duration: f64,
+    /// The `[robot]` table, written to a file the servo reads (`--robot-config`).
+    pub robot_file: Option<PathBuf>,
 }
 
 /// How a process ended, as the supervisor handles it.
@@ -152,6 +154,9 @@ impl Proc {
             cmd.args(["--duration", &l.duration.to_string()]);
             if resume {
                 cmd.arg("--resume");
+            }
+            if let Some(f) = &l.robot_file {
+                cmd.arg("--robot-config").arg(f);
             }
         }
         cmd.args(&self.spec.args);

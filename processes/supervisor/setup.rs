@@ -143,12 +143,27 @@ impl Setup {
             }
             None => None,
         };
+        let robot_file = match &stack.robot {
+            Some(r) => {
+                let f = self.dir.join("robot.toml");
+                let mut t = toml::Table::new();
+                t.insert(
+                    "robot".into(),
+                    toml::Value::try_from(r).context("writing [robot]")?,
+                );
+                std::fs::write(&f, toml::to_string(&t).context("writing [robot]")?)
+                    .with_context(|| format!("writing {}", f.display()))?;
+                Some(f)
+            }
+            None => None,
+        };
         let launch = Launch {
             prefix: stack.prefix.clone(),
             scenario: stack.scenario.clone(),
             seed: stack.seed,
             sim_file,
             duration: self.duration,
+            robot_file,
         };
         let mut procs = stack
             .process

@@ -389,16 +389,16 @@ impl ServoBoard {
 }
 
 /// The force samples' way in: the subscriber, the gate, and the count of injected samples.
-struct ForceInput<'a> {
-    ports: &'a Ports,
-    gate: &'a mut SampleGate,
-    injected: &'a mut GateCounters,
+pub(super) struct ForceInput<'a> {
+    pub(super) ports: &'a Ports,
+    pub(super) gate: &'a mut SampleGate,
+    pub(super) injected: &'a mut GateCounters,
 }
 
 impl ForceInput<'_> {
     /// Every new force sample through the gate, judged against the clock at receipt: the
     /// sensor board outranks the servo on its core and may publish after this tick woke.
-    fn take(&mut self) {
+    pub(super) fn take(&mut self) {
         while let Ok(Some(s)) = self.ports.wrench.receive() {
             let w = s.payload();
             let v = self.gate.offer(w, rt::monotonic_ns());
@@ -410,7 +410,7 @@ impl ForceInput<'_> {
 
     /// Publishes the world's first sample `p0` and waits for the first good force sample.
     /// None if stopped first.
-    fn wait(
+    pub(super) fn wait(
         &mut self,
         p0: PlantSample,
         args: &ServoArgs,
@@ -506,7 +506,7 @@ fn controller(
 /// Commands: a tangent estimate asked for (`wanted`: the number of estimations started when it
 /// was sent) starts once the servo tracks (the lockstep reference replays it at the same tick,
 /// `Replay::requested`), unless one started since.
-fn take_commands(
+pub(super) fn take_commands(
     command: &Subscriber<Svc, ServoCommand, ()>,
     stats: &mut LoopStats,
     wanted: &mut Option<u32>,

@@ -18,6 +18,7 @@
 mod board;
 mod link;
 mod ports;
+mod robot;
 mod timing;
 
 use crate::rt;
@@ -71,6 +72,8 @@ pub struct ServoArgs {
     pub histograms: Option<PathBuf>,
     /// Monotonic time `main` was entered (ns), for the start-up report.
     pub main_ns: u64,
+    /// A robot to drive instead of the simulated world (`[robot]`, docs/franka.md).
+    pub robot: Option<crate::stack::RobotTable>,
 }
 
 /// How the servo ended.
@@ -85,6 +88,9 @@ pub enum ServoEnd {
 /// Runs the board until the scenario ends, the duration passes or `stop` is set: the
 /// iceoryx2 example's loop around [`ServoBoard::tick`], on absolute deadlines (no busy-spin).
 pub fn run(args: &ServoArgs, stop: &AtomicBool) -> Result<ServoEnd> {
+    if let Some(table) = &args.robot {
+        return robot::run(args, table, stop);
+    }
     let Some(mut board) = ServoBoard::start(args, stop)? else {
         return Ok(ServoEnd::Stopped);
     };

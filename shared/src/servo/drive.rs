@@ -201,7 +201,7 @@ impl TwoLink {
 
 /// Sensor-frame force into the plane, for a sensor whose x axis is at the angle with sine
 /// `s` and cosine `c`.
-pub(super) fn to_plane(s: f64, c: f64, w: Wrench) -> Vec2 {
+pub fn to_plane(s: f64, c: f64, w: Wrench) -> Vec2 {
     Vec2::new(c * w.force.x - s * w.force.y, s * w.force.x + c * w.force.y)
 }
 

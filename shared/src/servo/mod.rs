@@ -29,7 +29,7 @@ mod tracking;
 pub use contact::{
     ContactReport, ContactState, contact_damping, contact_mode_above_dither, dither_damping_ratio,
 };
-pub use drive::{TaskCommand, TaskDrive, TaskInput};
+pub use drive::{TaskCommand, TaskDrive, TaskInput, to_plane};
 pub use params::{
     ApproachParams, DriftSource, ProbeForceLoop, SafeParams, ServoParams, TrackingParams,
 };
