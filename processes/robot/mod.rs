@@ -3,9 +3,9 @@
 //! is one [`ArmCycle`]: the packet's state and the model at it in, the torques out within the
 //! cycle, clocked by the robot's packets and timed by the robot's own time field.
 //!
-//! Today the loop holds the tool where it found it ([`hold`]: the hold of `ArmCycle` without a
-//! servo), which is what `afs bench robot` measures; the thesis's controller runs through the
-//! same cycle once the sensor's samples reach it.
+//! [`hold`] holds the tool where it found it (the hold of `ArmCycle` without a servo), which is
+//! what `afs bench robot` measures; the servo board drives the thesis's controller through the
+//! same cycle from a [`Session`] (`boards/servo/robot.rs`).
 
 use crate::stack::robot::RobotTable;
 use afs_shared::robot_cycle::{ArmCycle, ArmCycleParams, ArmState};

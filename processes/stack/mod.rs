@@ -109,7 +109,7 @@ pub struct StackFile {
     /// What `afs chaos` needs beyond the processes.
     #[serde(default)]
     pub chaos: Option<ChaosTable>,
-    /// A robot for the servo to drive (issue 48; checked, not driven yet).
+    /// A robot for the servo to drive (issue 48, docs/franka.md).
     #[serde(default)]
     pub robot: Option<RobotTable>,
 }

@@ -1,7 +1,7 @@
 //! A stack file's `[robot]` table (issue 48, docs/franka.md): the arm the servo will drive
 //! over FCI, the thesis's plane in its base frame, the tool on its flange and the limits.
-//! Checked when the file is read, each bad entry named in one line; the servo does not drive
-//! a robot yet, so a run with the table is refused after the checks.
+//! Checked when the file is read, each bad entry named in one line; the servo board reads it
+//! again from the file the supervisor writes ([`read`]).
 
 use afs_shared::robot_guard::{Guard, GuardLimits};
 use afs_shared::task_plane::{FrameError, TaskPlane, check_rotation};
