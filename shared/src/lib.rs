@@ -6,6 +6,7 @@ pub mod wire;
 
 pub mod arm;
 pub mod batch;
+pub mod cell;
 pub mod check;
 pub mod config;
 pub mod contact;

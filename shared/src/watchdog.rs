@@ -212,6 +212,12 @@ impl SampleGate {
         }
     }
 
+    /// The newest accepted sample, however old.
+    #[must_use]
+    pub fn newest(&self) -> Option<&WrenchSample> {
+        self.newest.as_ref()
+    }
+
     /// The counters.
     pub fn counters(&self) -> GateCounters {
         self.counters
@@ -220,6 +226,88 @@ impl SampleGate {
     /// The limits.
     pub fn params(&self) -> &GateParams {
         &self.params
+    }
+}
+
+/// The age of force data on a loop that a robot's packets clock (issue 48): a sample is as old
+/// as the robot's time that has passed since the loop first saw it. A real robot's time runs
+/// on, a missed cycle included, while the servo or its host stalls, so a sensor that stopped
+/// is found out after the gate's age limit of the robot's time; a simulated robot whose world
+/// stalls with the host stops its time too, and a sample that is the newest when the world
+/// goes on is not held against it. How late a sample may arrive before it is seen is the
+/// sensor board's limit (`--late-ms`).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct RobotClockAge {
+    seen: Option<(u64, u64, f64)>,
+}
+
+impl RobotClockAge {
+    /// The time (ns, on the samples' clock) at which to judge the newest sample `newest`
+    /// ([`SampleGate::current`]) when the robot's time is `robot_time_s`: its stamp plus the
+    /// robot's time since the loop first saw it. Without a sample, `now_ns`.
+    pub fn due_ns(&mut self, newest: Option<&WrenchSample>, robot_time_s: f64, now_ns: u64) -> u64 {
+        let Some(w) = newest else {
+            return now_ns;
+        };
+        let (seq, sample_ns, at) = match self.seen {
+            Some((seq, ns, at)) if seq == w.seq && ns == w.sample_ns => (seq, ns, at),
+            _ => (w.seq, w.sample_ns, robot_time_s),
+        };
+        self.seen = Some((seq, sample_ns, at));
+        let since_ns = ((robot_time_s - at).max(0.0) * 1e9).round() as u64;
+        sample_ns.saturating_add(since_ns)
+    }
+}
+
+#[cfg(test)]
+mod robot_clock_tests {
+    use super::*;
+
+    fn sample(seq: u64, sample_ns: u64) -> WrenchSample {
+        WrenchSample {
+            seq,
+            sample_ns,
+            ..WrenchSample::default()
+        }
+    }
+
+    /// A sample seen at robot time t is judged at its stamp plus the robot's time since:
+    /// 0 at first, 3 ms after three cycles without a new one, whatever the wall clock did.
+    #[test]
+    fn the_age_is_the_robots_time_since_the_sample_was_seen() {
+        let mut c = RobotClockAge::default();
+        let w = sample(7, 1_000_000);
+        assert_eq!(c.due_ns(Some(&w), 2.0, 9_000_000_000), 1_000_000);
+        // The host stalled 50 ms of wall time; the robot's time went on 1 ms.
+        assert_eq!(c.due_ns(Some(&w), 2.001, 9_050_000_000), 2_000_000);
+        assert_eq!(c.due_ns(Some(&w), 2.003, 9_060_000_000), 4_000_000);
+        // A new sample starts again from its own stamp.
+        let v = sample(8, 70_000_000);
+        assert_eq!(c.due_ns(Some(&v), 2.004, 9_061_000_000), 70_000_000);
+        assert_eq!(c.due_ns(None, 2.005, 123), 123);
+    }
+
+    /// Through the gate: a sensor that stops is stale after the limit of the robot's time.
+    #[test]
+    fn a_stopped_sensor_is_stale_after_the_limit_of_robot_time() {
+        let mut gate = SampleGate::new(GateParams {
+            max_age_ns: 5_000_000,
+            ..GateParams::default()
+        });
+        let w = WrenchSample {
+            version: WrenchSample::VERSION,
+            seq: 1,
+            sample_ns: 1_000,
+            ..WrenchSample::default()
+        };
+        assert_eq!(gate.offer(&w, 2_000), Verdict::Ok);
+        let mut c = RobotClockAge::default();
+        for k in 0..=5 {
+            let due = c.due_ns(gate.newest(), f64::from(k) * 1e-3, 1_000_000_000);
+            assert!(gate.current(due).is_ok(), "cycle {k}");
+        }
+        let due = c.due_ns(gate.newest(), 6e-3, 1_000_000_000);
+        assert_eq!(gate.current(due).err(), Some(Verdict::Stale));
     }
 }
 
