@@ -16,10 +16,12 @@ for --seconds. Needs franky-sim 1.0.4 and mujoco 3.17.0 (examples/python/require
 
 import argparse
 import logging
+import select
 import signal
 import struct
 import os
 import sys
+import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
@@ -43,6 +45,26 @@ def official_connect_reply(franka_server):
     command.handle = handle
 
 
+def run_cycles(server, seconds_per_cycle=0.001):
+    """franky-sim's loop (commands, step, state), with the real robot's cycle: after sending a
+    state, wait for the client's command for it (up to one cycle) before the next step, then
+    keep the cycle's pace. franky-sim's own `run_forever` sleeps only what is left of the
+    cycle after stepping; on a machine where a step takes longer than that it goes straight on
+    to the next step, so every command arrived a step late and the robot acted on the state
+    before last (docs/franka-cell.md, *The cell*)."""
+    server.running = True
+    while server.running:
+        start = time.monotonic()
+        server.run_once(realtime=False)
+        sent = time.monotonic()
+        sockets = [s for s in (rs._FrankaServer__udp_socket for rs in server.robot_servers) if s is not None]
+        if sockets:
+            select.select(sockets, [], [], seconds_per_cycle)
+        left = seconds_per_cycle - (time.monotonic() - start)
+        if left > 0 and time.monotonic() - sent < seconds_per_cycle:
+            time.sleep(left)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--hostname", required=True, help="loopback address to serve the FR3 on")
@@ -52,8 +74,11 @@ def main():
     parser.add_argument("--tip-radius-m", type=float, default=0.005, help="the tool tip's radius (m)")
     parser.add_argument("--wall-at", type=float, nargs=2, default=[0.554, 0.007], metavar=("X", "Y"), help="a point of the wall's face (base frame, m)")
     parser.add_argument("--wall-normal", type=float, nargs=2, default=[0.0, -1.0], metavar=("NX", "NY"), help="the wall's outward normal (towards the tool)")
-    parser.add_argument("--wall-solref", type=float, nargs=2, default=[0.02, 1.0], metavar=("TIMECONST", "DAMPRATIO"), help="the wall's MuJoCo solref (default: MuJoCo's own)")
-    parser.add_argument("--mu", type=float, default=0.3, help="Coulomb friction between the tip and the wall")
+    parser.add_argument("--stiffness-n-per-m", type=float, default=1e4, help="the contact's stiffness (N/m; the thesis's 10 kN/m)")
+    parser.add_argument("--damping-n-s-per-m", type=float, default=50.0, help="the contact's damping (N·s/m)")
+    parser.add_argument("--mu", type=float, default=0.3, help="Coulomb friction between the tip and the part")
+    parser.add_argument("--friction-damping-n-s-per-m", type=float, default=5.0, help="how hard sticking holds the tip (N·s/m, docs/mujoco.md)")
+    parser.add_argument("--cell-config", default=None, help="the part to build instead of the wall (`afs run` writes it: cell.toml)")
     # Given to every supervised process by `afs run`: the stack's prefix, scenario, seed, CPU
     # and priority. The cell uses the seed (the sensor's noise and bias); it runs at normal
     # priority, its pace set by franky-sim's real-time loop.
@@ -80,9 +105,20 @@ def main():
 
             # The start pose puts the flange 0.625 m up, pointing down: the tip's centre is
             # tool_length below it, and the wall stands 4 cm above the tip, below the fingers.
-            tip_z = 0.625 - args.tool_length_m
-            fr3_scene.add_tool(sim, args.tool_length_m, args.tip_radius_m)
-            fr3_scene.add_wall(sim, args.wall_at, args.wall_normal, tip_z + 0.04, args.wall_solref, args.mu)
+            if args.cell_config:
+                import tomllib
+
+                with open(args.cell_config, "rb") as f:
+                    spec = tomllib.load(f)
+                tool_length = spec["tool_length_m"]
+                part = fr3_scene.Part(spec["surface_m"], spec["plane_normal"], args.tip_radius_m)
+            else:
+                tool_length = args.tool_length_m
+                part = fr3_scene.Part.wall(args.wall_at, args.wall_normal, 0.625 - tool_length, args.tip_radius_m)
+            fr3_scene.add_tool(sim, tool_length, args.tip_radius_m)
+            part.build(sim)
+            part.add_contact(sim, mujoco, args.stiffness_n_per_m, args.damping_n_s_per_m, args.mu, args.friction_damping_n_s_per_m)
+            sim.register_pre_step_callback(lambda s: part.update(s, mujoco))
             sensor = fr3_scene.WristSensor(args.seed)
             try:
                 device = RdtDevice(args.hostname, args.rdt_port)
@@ -107,7 +143,7 @@ def main():
                 signal.signal(signal.SIGALRM, stop)
                 signal.setitimer(signal.ITIMER_REAL, args.seconds)
             print(f"ready {args.hostname}", flush=True)
-            server.run_forever(realtime=True)
+            run_cycles(server)
     return 0
 
 

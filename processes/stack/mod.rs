@@ -3,6 +3,7 @@
 //! `afs chaos` both say of a running stack ([`Timeline`] of a restart, [`Footprint`]). It sits
 //! below both: neither imports the other for it.
 
+pub mod cell;
 #[doc(hidden)]
 pub mod fci;
 mod footprint;
@@ -76,6 +77,11 @@ pub struct ProcessSpec {
     /// Alive but silent this long (ms) → killed and restarted (0: never).
     #[serde(default)]
     pub stall_ms: u64,
+    /// How long it may take before its data first flows (ms; default 5 000 for the servo,
+    /// 2 000 for the others): a board that waits on a device that comes up with the stack (a
+    /// simulated robot and its sensor) needs longer.
+    #[serde(default)]
+    pub start_grace_ms: Option<u64>,
 }
 
 impl ProcessSpec {
@@ -417,7 +423,8 @@ pub fn load_stack(opts: &RunOptions) -> Result<StackFile> {
     }
     opts.sim.apply(&mut s.sim)?;
     s.check()?;
-    if let Some(r) = &s.robot {
+    // A robot the graph starts itself (the simulated cell) cannot answer yet.
+    if let Some(r) = s.robot.as_ref().filter(|_| !s.has_cell()) {
         fci::preflight(r)?;
     }
     Ok(s)

@@ -52,6 +52,8 @@ pub struct Launch {
     pub duration: f64,
     /// The `[robot]` table, written to a file the servo reads (`--robot-config`).
     pub robot_file: Option<PathBuf>,
+    /// The simulated cell's part, written to a file the cell reads (`--cell-config`).
+    pub cell_file: Option<PathBuf>,
 }
 
 /// How a process ended, as the supervisor handles it.
@@ -158,6 +160,11 @@ impl Proc {
             if let Some(f) = &l.robot_file {
                 cmd.arg("--robot-config").arg(f);
             }
+        }
+        if self.spec.name == crate::stack::cell::CELL_PROCESS
+            && let Some(f) = &l.cell_file
+        {
+            cmd.arg("--cell-config").arg(f);
         }
         cmd.args(&self.spec.args);
         cmd.stdin(Stdio::null()).stdout(Stdio::null());
@@ -377,7 +384,9 @@ impl Proc {
             now.duration_since(from),
             self.data_since.is_some(),
             self.started.elapsed(),
-            policy::start_grace(self.board),
+            self.spec
+                .start_grace_ms
+                .map_or_else(|| policy::start_grace(self.board), Duration::from_millis),
             self.held,
         ) {
             eprintln!(

@@ -97,6 +97,7 @@ pub fn run(opts: &RunOptions, stop: &AtomicBool) -> Result<RunReport> {
         friction: friction.as_ref(),
         faults: &faults,
         chaos: chaos_report.as_ref(),
+        robot: stack.robot.is_some(),
     });
     let interrupted = end == RunEnd::Interrupted;
     Ok(RunReport {

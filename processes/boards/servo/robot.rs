@@ -1,9 +1,9 @@
-//! The servo board as the FCI client of a robot (issue 48, docs/franka.md, *The servo on the
+//! The servo board as the FCI client of a robot (issue 48, docs/franka-cell.md, *The servo on the
 //! robot*): the same controller, scenario driver, force gate, estimator link and streams as
 //! the simulated board, on an arm that the robot's packets clock instead of a world it steps.
 //!
-//! Each packet: the state in, every new force sample through the gate, the scenario driver
-//! at the robot's time, the commands, one [`ArmCycle::cycle`] (the guard, the servo on the
+//! Each packet: the state in, every new force sample through the gate (its age in the
+//! robot's time, `RobotClockAge`), the scenario driver at the robot's time, the commands, one [`ArmCycle::cycle`] (the guard, the servo on the
 //! task drive, the torques within the arm's limits), the torques out, then the tick's samples
 //! and the estimator's request moved along. The loop blocks only in the robot's receive.
 
@@ -17,12 +17,15 @@ use crate::robot::{CYCLE_S, Session};
 use crate::stack::RobotTable;
 use crate::{hist, ipc, rt};
 use afs_shared::config::SimConfig;
-use afs_shared::msg::{Board, LoopFlags, LoopStats, PlantSample, ServoFlags, ServoSample};
+use afs_shared::msg::{
+    Board, InsertionState, LoopFlags, LoopStats, PlantSample, ServoFlags, ServoSample,
+    WorldSnapshot, WorldState,
+};
 use afs_shared::robot_cycle::CycleOutput;
 use afs_shared::scenario::{DriverState, Scenario, ScenarioDriver};
 use afs_shared::sensor::Wrench;
 use afs_shared::servo::{ServoCore, TaskDrive, to_plane};
-use afs_shared::watchdog::{GateCounters, GateParams, SampleGate};
+use afs_shared::watchdog::{GateCounters, GateParams, RobotClockAge, SampleGate, Verdict};
 use anyhow::{Result, anyhow};
 use franka::{RobotState, Torques, motion_finished};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -33,7 +36,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 /// The robot (unreachable, refusing, ending the motion), the ports, or no force data.
 pub fn run(args: &ServoArgs, table: &RobotTable, stop: &AtomicBool) -> Result<ServoEnd> {
     let scenario = Scenario::new(&args.scenario, &args.base).map_err(anyhow::Error::msg)?;
-    let cfg = scenario.cfg.clone();
+    let mut cfg = scenario.cfg.clone();
+    // The part where the tool starts: the task frame's origin (the cell builds the same,
+    // `stack::cell`).
+    cfg.surface = afs_shared::cell::surface_through(&cfg, afs_shared::math::Vec2::zeros());
     let duration = if args.duration_s > 0.0 {
         args.duration_s.min(scenario.natural_duration_s)
     } else {
@@ -45,41 +51,53 @@ pub fn run(args: &ServoArgs, table: &RobotTable, stop: &AtomicBool) -> Result<Se
     let (ports, transport) = Ports::open(&node, args)?;
     startup.open(&node)?;
     startup.report.ports_ns = Startup::now();
-    let mut session = Session::open(table)?;
+    // Real-time before the robot and the first force sample: locking the memory takes tens of
+    // milliseconds, which would otherwise pass between the first sample and the first packet.
+    let rtr = rt::setup(args.priority, true, args.cpu);
+    startup.report.rt_ns = Startup::now();
+    for w in &rtr.warnings {
+        eprintln!("afs-servo: warning: {w}");
+    }
+    let Some(mut session) = connect(table, args.startup_timeout_s, stop)? else {
+        return Ok(ServoEnd::Stopped);
+    };
     let gate_params = GateParams {
         max_age_ns: (args.max_force_age_ms * 1e6) as u64,
         force_limit_n: cfg.sensor.range_force_n,
         torque_limit_nm: cfg.sensor.range_torque_nm,
         ..GateParams::default()
     };
+    // A restarted servo carries on where its predecessor left the scenario (the supervisor's
+    // world blackboard): the controller, the driver, the tick count and the scenario's time.
+    let snapshot = match (&ports.world, args.resume) {
+        (Some(w), true) => w.newest()?,
+        _ => None,
+    };
     let (mut gate, mut injected) = (SampleGate::new(gate_params), GateCounters::default());
+    if let Some(s) = &snapshot {
+        gate = SampleGate::resume(gate_params, s.gate);
+        injected = s.injected;
+    }
     let mut input = ForceInput {
         ports: &ports,
         gate: &mut gate,
         injected: &mut injected,
     };
-    let p0 = plant_sample(&cfg, &session.start, Wrench::default(), 0, 0.0);
+    // The first sample: after a restart the predecessor's last tick again (its successor
+    // then goes on with the next), otherwise the tool where it starts, tick 0.
+    let p0 = snapshot
+        .filter(|s| s.plant.version == PlantSample::VERSION && s.plant.seq == s.seq)
+        .map_or_else(
+            || plant_sample(&cfg, &session.start, Wrench::default(), 0, 0.0),
+            |s| s.plant,
+        );
     let Some(first) = input.wait(p0, args, (CYCLE_S * 1e9) as u64, &mut startup, stop)? else {
         return Ok(ServoEnd::Stopped);
     };
-    let drive = TaskDrive {
-        inertia: session.inertia,
-        gains: session.gains,
-        theta_rad: session.start.theta_rad,
-    };
-    let tangent0 = cfg.surface.tangent_angle_at(cfg.start_u_m) + cfg.tangent_error_rad;
-    let mut servo = ServoCore::new_task(
-        cfg.servo_params(),
-        drive,
-        session.start.position_m,
-        first.wrench().tared(first.tare()),
-        tangent0,
-    )
-    .map_err(|e| anyhow!("[sim.servo] {e}"))?;
-    servo.set_tare(first.tare());
+    let (servo, driver) = controller(&scenario, &cfg, &session, &first, snapshot.as_ref())?;
     let mut board = RobotBoard {
         servo,
-        driver: scenario.driver(),
+        driver,
         cfg,
         gate,
         injected,
@@ -90,25 +108,75 @@ pub fn run(args: &ServoArgs, table: &RobotTable, stop: &AtomicBool) -> Result<Se
             period_ns: (CYCLE_S * 1e9) as u64,
             ..Default::default()
         },
-        seq: 1,
-        time_s: 0.0,
+        seq: snapshot.map_or(1, |s| s.seq + 1),
+        time_s: snapshot.map_or(0.0, |s| s.world.time_s),
         duration_s: duration,
         estimate_wanted: None,
         last_tare: first.tare(),
         ports,
+        age: RobotClockAge::default(),
     };
-    let rtr = rt::setup(args.priority, true, args.cpu);
-    startup.report.rt_ns = Startup::now();
     startup.send();
-    for w in &rtr.warnings {
-        eprintln!("afs-servo: warning: {w}");
-    }
     board.stats.flags.set(LoopFlags::SCHED_FIFO, rtr.fifo);
     board.stats.flags.set(LoopFlags::MLOCKED, rtr.mlocked);
     board.stats.flags.set(LoopFlags::PINNED, rtr.pinned);
     let end = board.drive(&mut session, stop)?;
     board.finish(args.histograms.as_deref())?;
     Ok(end)
+}
+
+/// The controller on the task drive at the arm's first state and the scenario's driver; after
+/// a restart, given their predecessor's state (a controller that will not take it starts
+/// afresh, with a warning).
+fn controller(
+    scenario: &Scenario,
+    cfg: &SimConfig,
+    session: &Session,
+    first: &afs_shared::msg::WrenchSample,
+    snapshot: Option<&WorldSnapshot>,
+) -> Result<(ServoCore, ScenarioDriver)> {
+    let drive = TaskDrive {
+        inertia: session.inertia,
+        gains: session.gains,
+        theta_rad: session.start.theta_rad,
+    };
+    let tangent0 = cfg.surface.tangent_angle_at(cfg.start_u_m) + cfg.tangent_error_rad;
+    let new = || {
+        ServoCore::new_task(
+            cfg.servo_params(),
+            drive,
+            session.start.position_m,
+            first.wrench().tared(first.tare()),
+            tangent0,
+        )
+        .map_err(|e| anyhow!("[sim.servo] {e}"))
+    };
+    let mut servo = new()?;
+    let mut driver = scenario.driver();
+    if let Some(s) = snapshot {
+        driver.resume(s.world.time_s, (&s.driver).into());
+        if let Err(e) = servo.restore(&s.controller) {
+            eprintln!("afs-servo: warning: {e}; the controller starts afresh");
+            servo = new()?;
+        }
+    }
+    servo.set_tare(first.tare());
+    Ok((servo, driver))
+}
+
+/// The robot's session, once it answers: a robot the graph starts itself (the simulated cell)
+/// comes up beside the servo, so a robot that does not answer is asked again every 0.2 s for
+/// `timeout_s`; then the last refusal is the error. None if stopped first.
+fn connect(table: &RobotTable, timeout_s: f64, stop: &AtomicBool) -> Result<Option<Session>> {
+    let t0 = std::time::Instant::now();
+    loop {
+        match Session::open(table) {
+            Ok(s) => return Ok(Some(s)),
+            Err(e) if t0.elapsed().as_secs_f64() >= timeout_s => return Err(e),
+            Err(_) if stop.load(Ordering::Relaxed) => return Ok(None),
+            Err(_) => std::thread::sleep(std::time::Duration::from_millis(200)),
+        }
+    }
 }
 
 /// The board's state between packets.
@@ -128,6 +196,8 @@ struct RobotBoard {
     estimate_wanted: Option<u32>,
     last_tare: Wrench,
     ports: Ports,
+    /// Force data's age in the robot's time.
+    age: RobotClockAge,
 }
 
 impl RobotBoard {
@@ -184,9 +254,10 @@ impl RobotBoard {
             injected: &mut self.injected,
         }
         .take();
-        let (wrench, valid) = match self.gate.current(now) {
-            Ok((w, _)) => {
-                hist::record(&mut self.timing.age, now.saturating_sub(w.sample_ns));
+        let due = self.age.due_ns(self.gate.newest(), self.time_s, now);
+        let (wrench, valid) = match self.gate.current(due) {
+            Ok((w, age)) => {
+                hist::record(&mut self.timing.age, age);
                 let tare = w.tare();
                 if tare != self.last_tare {
                     self.servo.set_tare(tare);
@@ -194,13 +265,13 @@ impl RobotBoard {
                 }
                 (w.wrench(), true)
             }
-            Err(_) => {
-                self.stats.stale_ticks += 1;
+            Err(v) => {
+                self.stats.stale_ticks += u64::from(v == Verdict::Stale);
                 (Wrench::default(), false)
             }
         };
         let arm = fr3.arm_state(state);
-        let u = self.servo.state().track.odometer_total_m;
+        let u = self.cfg.surface.to_local(cycle.planar(&arm).position_m).0;
         let done = self.time_s >= self.duration_s
             || self.driver.step(self.time_s, u, &mut self.servo) == DriverState::Done;
         if done {
@@ -226,22 +297,40 @@ impl RobotBoard {
         if self.servo.is_safe() {
             self.stats.safe_ticks += 1;
         }
-        let reading = match self.gate.current(now) {
-            Ok((w, _)) => w.wrench().tared(self.last_tare),
-            Err(_) => Wrench::default(),
-        };
+        let due = self.age.due_ns(self.gate.newest(), self.time_s, now);
+        let used = self.gate.current(due).ok();
+        let reading = used.map_or_else(Wrench::default, |(w, _)| w.wrench().tared(self.last_tare));
         let mut p = plant_sample(&self.cfg, &out.planar, reading, self.seq, self.time_s);
         p.tick_ns = now;
         p.publish_ns = rt::monotonic_ns();
+        // The snapshot first, then the samples: a servo killed between the two leaves a tick
+        // its successor sends again, never one sent twice with different contents.
+        if let Some(world) = &self.ports.world {
+            world.write(WorldSnapshot {
+                version: WorldSnapshot::VERSION,
+                reserved: 0,
+                seq: self.seq,
+                world: WorldState {
+                    time_s: self.time_s,
+                    ..WorldState::default()
+                },
+                driver: self.driver.memo().into(),
+                controller: self.servo.state(),
+                gate: self.gate.counters(),
+                injected: self.injected,
+                insertion: InsertionState::default(),
+                plant: p,
+            });
+        }
         if self.ports.plant.send_copy(p).is_err() {
             self.stats.publish_failures += 1;
         }
         let mut s = ServoSample::of_tick(&self.servo, self.seq, now, self.time_s);
-        if let Ok((w, _)) = self.gate.current(now) {
+        if let Some((w, age)) = used {
             s.flags |= ServoFlags::FORCE_VALID;
             s.wrench_seq = w.seq;
             s.wrench_sample_ns = w.sample_ns;
-            s.force_age_ns = now.saturating_sub(w.sample_ns);
+            s.force_age_ns = age;
         }
         s.publish_ns = rt::monotonic_ns();
         if self.ports.servo.send_copy(s).is_err() {
@@ -278,12 +367,17 @@ impl RobotBoard {
     }
 }
 
+/// The smallest push that counts as contact on a robot (N), whatever the sensor's noise.
+pub const CONTACT_FLOOR_N: f64 = 0.05;
+
 /// The tick's world sample on a robot: what afs can know of it. The tool's planar pose and
 /// velocity are the robot's. The force is the sensor's (tared, turned into the plane by θ),
-/// standing in for the contact's: its component along the configured surface's normal is the
-/// normal force, and a contact is one above the approach's touch (half the preload). The
-/// surface coordinate is the tool's x and the tangent the configured surface's there
-/// (`[sim.surface]`, the part as the cell or the user placed it). Joint fields are zero (seven
+/// standing in for the contact's: its component along the surface's normal is the normal
+/// force, and a contact is a push above five of the sensor noise's standard deviations (at
+/// least [`CONTACT_FLOOR_N`]). The surface
+/// coordinate is the tool's on the scenario's surface as placed in the plane
+/// (`afs_shared::cell::surface_through`, the part the cell builds) and the tangent the
+/// surface's there. Joint fields are zero (seven
 /// joints do not fit the planar arm's two).
 fn plant_sample(
     cfg: &SimConfig,
@@ -294,11 +388,12 @@ fn plant_sample(
 ) -> PlantSample {
     let (sin, cos) = s.theta_rad.sin_cos();
     let f = to_plane(sin, cos, reading);
-    let u = s.position_m.x;
+    let (u, _) = cfg.surface.to_local(s.position_m);
     let tangent = cfg.surface.tangent_angle_at(u);
     let normal = afs_shared::math::perp(afs_shared::math::unit(tangent));
     let pushed = f.dot(&normal);
-    let touch = cfg.servo.approach.touch_fraction * cfg.servo.hybrid.preload_n;
+    // In contact: a push the sensor's noise cannot make (five of its standard deviations).
+    let touch = (5.0 * cfg.sensor.noise_force_n).max(CONTACT_FLOOR_N);
     PlantSample {
         version: PlantSample::VERSION,
         contact_count: u32::from(pushed > touch),
