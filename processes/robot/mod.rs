@@ -15,7 +15,7 @@ use afs_shared::task_plane::{
 };
 use anyhow::{Context, Result, anyhow};
 use franka::model::{Frame, Model};
-use franka::{Robot, RobotState, Torques, motion_finished};
+use franka::{ActiveTorqueControl, Robot, RobotState, Torques, motion_finished};
 use hdrhistogram::Histogram;
 use nalgebra::{Matrix3, Vector3};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -74,6 +74,16 @@ impl Fr3 {
         &self.robot
     }
 
+    /// Starts torque control.
+    ///
+    /// # Errors
+    /// The robot refused it (its reason named).
+    pub fn torque_control(&self) -> Result<ActiveTorqueControl<'_>> {
+        self.robot
+            .start_torque_control()
+            .map_err(|e| anyhow!("[robot] torque control refused: {e}"))
+    }
+
     /// The arm's state and the model at it for one packet (the tool as afs's `[robot.tool]`,
     /// the load as set). Allocates nothing.
     #[must_use]
@@ -104,6 +114,18 @@ impl Fr3 {
             )),
         }
     }
+}
+
+/// The next packet of a torque-control loop: the robot's state and its time since the last
+/// packet (s; more than a cycle when cycles were missed).
+///
+/// # Errors
+/// The robot ended the motion (its reason named).
+pub fn next_packet(control: &mut ActiveTorqueControl<'_>) -> Result<(RobotState, f64)> {
+    control
+        .read_once()
+        .map(|(state, period)| (state, period.as_secs_f64()))
+        .map_err(|e| anyhow!("[robot] the motion ended: {e}"))
 }
 
 /// What a hold measured.
@@ -253,18 +275,13 @@ fn hold_here(table: &RobotTable, seconds: f64, stop: &AtomicBool) -> Result<Hold
     let mut trip = None;
     let wall = Instant::now();
     let Session { fr3, cycle, .. } = &mut session;
-    let mut control = fr3
-        .robot
-        .start_torque_control()
-        .map_err(|e| anyhow!("[robot] torque control refused: {e}"))?;
+    let mut control = fr3.torque_control()?;
     loop {
-        let (state, period) = control
-            .read_once()
-            .map_err(|e| anyhow!("[robot] the motion ended: {e}"))?;
+        let (state, period_s) = next_packet(&mut control)?;
         let received = Instant::now();
-        let steps = (period.as_secs_f64() / CYCLE_S).round() as u64;
+        let steps = (period_s / CYCLE_S).round() as u64;
         run.missed_cycles += steps.saturating_sub(1);
-        run.robot_time_s += period.as_secs_f64();
+        run.robot_time_s += period_s;
         let arm = fr3.arm_state(&state);
         let out = cycle.hold_at(&arm, &pose, CYCLE_S);
         let last = run.robot_time_s >= seconds || stop.load(Ordering::Relaxed);

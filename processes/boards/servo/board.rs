@@ -78,17 +78,12 @@ impl ServoBoard {
         let cfg = &scenario.cfg;
         let dt = cfg.servo.dt();
         let period_ns = (dt * 1e9).round() as u64;
-        let duration = if args.duration_s > 0.0 {
-            args.duration_s.min(scenario.natural_duration_s)
-        } else {
-            scenario.natural_duration_s
-        };
-        let mut startup = Startup::new(Board::Servo, args.main_ns);
-        let node = ipc::node(&args.prefix, Board::Servo.name())?;
-        startup.report.node_ns = Startup::now();
-        let (ports, transport) = Ports::open(&node, args)?;
-        startup.open(&node)?;
-        startup.report.ports_ns = Startup::now();
+        let Opened {
+            duration_s: duration,
+            mut startup,
+            ports,
+            transport,
+        } = open(args, scenario.natural_duration_s)?;
 
         // The world: fresh, or where the last servo left it, with the counts that go on
         // across restarts.
@@ -386,6 +381,40 @@ impl ServoBoard {
         }
         Ok(())
     }
+}
+
+/// What either form of the board opens first.
+pub(super) struct Opened {
+    /// The scenario's length on this run (s): `--duration`, at most its natural one.
+    pub(super) duration_s: f64,
+    /// The start-up report, its node and ports phases stamped.
+    pub(super) startup: Startup,
+    /// The board's ports.
+    pub(super) ports: Ports,
+    /// The estimator's service.
+    pub(super) transport: super::link::Transport,
+}
+
+/// The node, the ports and the start-up report's publisher of a servo board whose scenario
+/// takes `natural_duration_s`.
+pub(super) fn open(args: &ServoArgs, natural_duration_s: f64) -> Result<Opened> {
+    let duration_s = if args.duration_s > 0.0 {
+        args.duration_s.min(natural_duration_s)
+    } else {
+        natural_duration_s
+    };
+    let mut startup = Startup::new(Board::Servo, args.main_ns);
+    let node = ipc::node(&args.prefix, Board::Servo.name())?;
+    startup.report.node_ns = Startup::now();
+    let (ports, transport) = Ports::open(&node, args)?;
+    startup.open(&node)?;
+    startup.report.ports_ns = Startup::now();
+    Ok(Opened {
+        duration_s,
+        startup,
+        ports,
+        transport,
+    })
 }
 
 /// The force samples' way in: the subscriber, the gate, and the count of injected samples.

@@ -3,25 +3,26 @@
 //! the simulated board, on an arm that the robot's packets clock instead of a world it steps.
 //!
 //! Each packet: the state in, every new force sample through the gate (its age in the
-//! robot's time, `RobotClockAge`), the scenario driver at the robot's time, the commands, one [`ArmCycle::cycle`] (the guard, the servo on the
-//! task drive, the torques within the arm's limits), the torques out, then the tick's samples
-//! and the estimator's request moved along. The loop blocks only in the robot's receive.
+//! robot's time, `RobotClockAge`), the scenario driver at the robot's time, the commands, one
+//! [`ArmCycle::cycle`] (the guard, the servo on the task drive, the torques within the arm's
+//! limits), the torques out, then the tick's samples and the estimator's request moved along.
+//! The loop blocks only in the robot's receive.
 
-use super::board::{ForceInput, take_commands};
+use super::board::{ForceInput, Opened, open, take_commands};
 use super::link::EstimatorLink;
 use super::ports::Ports;
 use super::timing::{Timing, publish_stats};
 use super::{ServoArgs, ServoEnd};
 use crate::boards::Startup;
-use crate::robot::{CYCLE_S, Session};
+use crate::robot::{CYCLE_S, Session, next_packet};
 use crate::stack::RobotTable;
-use crate::{hist, ipc, rt};
+use crate::{hist, rt};
 use afs_shared::config::SimConfig;
 use afs_shared::msg::{
-    Board, InsertionState, LoopFlags, LoopStats, PlantSample, ServoFlags, ServoSample,
-    WorldSnapshot, WorldState,
+    InsertionState, LoopFlags, LoopStats, PlantSample, ServoFlags, ServoSample, WorldSnapshot,
+    WorldState,
 };
-use afs_shared::robot_cycle::CycleOutput;
+use afs_shared::robot_cycle::{ArmCycle, CycleOutput};
 use afs_shared::scenario::{DriverState, Scenario, ScenarioDriver};
 use afs_shared::sensor::Wrench;
 use afs_shared::servo::{ServoCore, TaskDrive, to_plane};
@@ -40,17 +41,12 @@ pub fn run(args: &ServoArgs, table: &RobotTable, stop: &AtomicBool) -> Result<Se
     // The part where the tool starts: the task frame's origin (the cell builds the same,
     // `stack::cell`).
     cfg.surface = afs_shared::cell::surface_through(&cfg, afs_shared::math::Vec2::zeros());
-    let duration = if args.duration_s > 0.0 {
-        args.duration_s.min(scenario.natural_duration_s)
-    } else {
-        scenario.natural_duration_s
-    };
-    let mut startup = Startup::new(Board::Servo, args.main_ns);
-    let node = ipc::node(&args.prefix, Board::Servo.name())?;
-    startup.report.node_ns = Startup::now();
-    let (ports, transport) = Ports::open(&node, args)?;
-    startup.open(&node)?;
-    startup.report.ports_ns = Startup::now();
+    let Opened {
+        duration_s: duration,
+        mut startup,
+        ports,
+        transport,
+    } = open(args, scenario.natural_duration_s)?;
     // Real-time before the robot and the first force sample: locking the memory takes tens of
     // milliseconds, which would otherwise pass between the first sample and the first packet.
     let rtr = rt::setup(args.priority, true, args.cpu);
@@ -205,16 +201,10 @@ impl RobotBoard {
     /// ends or `stop`; the last command ends the motion through FCI's own finish.
     fn drive(&mut self, session: &mut Session, stop: &AtomicBool) -> Result<ServoEnd> {
         let Session { fr3, cycle, .. } = session;
-        let mut control = fr3
-            .robot()
-            .start_torque_control()
-            .map_err(|e| anyhow!("[robot] torque control refused: {e}"))?;
+        let mut control = fr3.torque_control()?;
         loop {
-            let (state, period) = control
-                .read_once()
-                .map_err(|e| anyhow!("[robot] the motion ended: {e}"))?;
+            let (state, dt) = next_packet(&mut control)?;
             let now = rt::monotonic_ns();
-            let dt = period.as_secs_f64();
             if dt > 1.5 * CYCLE_S {
                 self.stats.misses += ((dt / CYCLE_S).round() as u64).saturating_sub(1);
             }
@@ -243,7 +233,7 @@ impl RobotBoard {
     fn packet(
         &mut self,
         fr3: &crate::robot::Fr3,
-        cycle: &mut afs_shared::robot_cycle::ArmCycle,
+        cycle: &mut ArmCycle,
         state: &RobotState,
         dt: f64,
         now: u64,
