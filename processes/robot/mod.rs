@@ -245,12 +245,7 @@ impl Session {
     /// The pose the tool started at.
     #[must_use]
     pub fn start_pose(&self) -> HoldPose {
-        let s = &self.start;
-        HoldPose {
-            position_m: s.position_m,
-            theta_rad: s.theta_rad,
-            normal_m: s.normal_m,
-        }
+        HoldPose::of(&self.start)
     }
 }
 

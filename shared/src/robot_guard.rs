@@ -116,7 +116,9 @@ pub struct HoldPose {
 }
 
 impl HoldPose {
-    fn of(s: &PlanarState) -> Self {
+    /// The pose of the tool's planar state `s`.
+    #[must_use]
+    pub fn of(s: &PlanarState) -> Self {
         Self {
             position_m: s.position_m,
             theta_rad: s.theta_rad,

@@ -20,9 +20,10 @@ use crate::{hist, rt};
 use afs_shared::config::SimConfig;
 use afs_shared::msg::{
     InsertionState, LoopFlags, LoopStats, PlantSample, ServoFlags, ServoSample, WorldSnapshot,
-    WorldState,
+    WorldState, WrenchSample,
 };
 use afs_shared::robot_cycle::{ArmCycle, CycleOutput};
+use afs_shared::robot_guard::HoldPose;
 use afs_shared::scenario::{DriverState, Scenario, ScenarioDriver};
 use afs_shared::sensor::Wrench;
 use afs_shared::servo::{ServoCore, TaskDrive, to_plane};
@@ -209,7 +210,7 @@ impl RobotBoard {
                 self.stats.misses += ((dt / CYCLE_S).round() as u64).saturating_sub(1);
             }
             self.time_s += dt;
-            let (out, done) = self.packet(fr3, cycle, &state, dt.max(CYCLE_S), now);
+            let (out, used, done) = self.packet(fr3, cycle, &state, dt.max(CYCLE_S), now);
             let stopped = stop.load(Ordering::Relaxed);
             let torques = Torques::new(out.torque.torque_nm.into());
             let sent = if done || stopped {
@@ -218,7 +219,7 @@ impl RobotBoard {
                 control.write_once(&torques)
             };
             sent.map_err(|e| anyhow!("[robot] the command was refused: {e}"))?;
-            self.after(&out, now);
+            self.after(&out, used, now);
             if done {
                 return Ok(ServoEnd::Finished);
             }
@@ -228,8 +229,9 @@ impl RobotBoard {
         }
     }
 
-    /// One packet's command: the force through the gate, the scenario, the cycle. `done`
-    /// when the scenario has ended (the command then holds the tool where it is).
+    /// One packet's command: the force through the gate, the scenario, the cycle; with the
+    /// force sample used and its age at `now` (ns, on the wall clock), and `done` when the
+    /// scenario has ended (the command then holds the tool where it is).
     fn packet(
         &mut self,
         fr3: &crate::robot::Fr3,
@@ -237,41 +239,41 @@ impl RobotBoard {
         state: &RobotState,
         dt: f64,
         now: u64,
-    ) -> (CycleOutput, bool) {
+    ) -> (CycleOutput, Option<(WrenchSample, u64)>, bool) {
         ForceInput {
             ports: &self.ports,
             gate: &mut self.gate,
             injected: &mut self.injected,
         }
         .take();
+        // Judged by the robot's time (`RobotClockAge`); the age recorded is the wall clock's,
+        // the data's real age at use.
         let due = self.age.due_ns(self.gate.newest(), self.time_s, now);
-        let (wrench, valid) = match self.gate.current(due) {
-            Ok((w, age)) => {
+        let used = match self.gate.current(due) {
+            Ok((w, _)) => {
+                let age = now.saturating_sub(w.sample_ns);
                 hist::record(&mut self.timing.age, age);
                 let tare = w.tare();
                 if tare != self.last_tare {
                     self.servo.set_tare(tare);
                     self.last_tare = tare;
                 }
-                (w.wrench(), true)
+                Some((w, age))
             }
             Err(v) => {
                 self.stats.stale_ticks += u64::from(v == Verdict::Stale);
-                (Wrench::default(), false)
+                None
             }
         };
+        let (wrench, valid) = used.map_or((Wrench::default(), false), |(w, _)| (w.wrench(), true));
         let arm = fr3.arm_state(state);
-        let u = self.cfg.surface.to_local(cycle.planar(&arm).position_m).0;
+        let planar = cycle.planar(&arm);
+        let u = self.cfg.surface.to_local(planar.position_m).0;
         let done = self.time_s >= self.duration_s
             || self.driver.step(self.time_s, u, &mut self.servo) == DriverState::Done;
         if done {
-            let hold = cycle.planar(&arm);
-            let pose = afs_shared::robot_guard::HoldPose {
-                position_m: hold.position_m,
-                theta_rad: hold.theta_rad,
-                normal_m: hold.normal_m,
-            };
-            return (cycle.hold_at(&arm, &pose, dt), true);
+            let hold = cycle.hold_at(&arm, &HoldPose::of(&planar), dt);
+            return (hold, used, true);
         }
         take_commands(
             &self.ports.command,
@@ -279,16 +281,16 @@ impl RobotBoard {
             &mut self.estimate_wanted,
             &mut self.servo,
         );
-        (cycle.cycle(&mut self.servo, &arm, wrench, valid, dt), false)
+        let out = cycle.cycle(&mut self.servo, &arm, wrench, valid, dt);
+        (out, used, false)
     }
 
-    /// After the command went out: the tick's samples, the estimator's request, the timing.
-    fn after(&mut self, out: &CycleOutput, now: u64) {
+    /// After the command went out: the tick's samples (`used`: the force sample the cycle
+    /// used, with its age), the estimator's request, the timing.
+    fn after(&mut self, out: &CycleOutput, used: Option<(WrenchSample, u64)>, now: u64) {
         if self.servo.is_safe() {
             self.stats.safe_ticks += 1;
         }
-        let due = self.age.due_ns(self.gate.newest(), self.time_s, now);
-        let used = self.gate.current(due).ok();
         let reading = used.map_or_else(Wrench::default, |(w, _)| w.wrench().tared(self.last_tare));
         let mut p = plant_sample(&self.cfg, &out.planar, reading, self.seq, self.time_s);
         p.tick_ns = now;
