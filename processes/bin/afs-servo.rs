@@ -3,7 +3,9 @@
 //! ```text
 //! afs-servo --prefix afs --scenario surface-tracking --cpu 1 --priority 80
 //! ```
-//! Normally started by `afs run`; it waits for `afs-sensor` with the same prefix.
+//! Normally started by `afs run`; it waits for `afs-sensor` with the same prefix. Exits 0 when
+//! its scenario ends or it is stopped, 2 on an error, 3 when the robot of `--robot-config` was
+//! lost (`afs::robot::ROBOT_LOST_EXIT`: the supervisor then ends the run).
 
 use afs::boards::servo::{EstimatorVia, ServoArgs, ServoEnd, run};
 use afs::boards::{Common, stop_flag};
@@ -90,7 +92,12 @@ fn main() -> ExitCode {
         Ok(ServoEnd::Finished | ServoEnd::Stopped) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("afs-servo: error: {e:#}");
-            ExitCode::from(2)
+            // The supervisor ends the run on this one instead of restarting the servo.
+            if afs::robot::is_robot_lost(&e) {
+                ExitCode::from(afs::robot::ROBOT_LOST_EXIT)
+            } else {
+                ExitCode::from(2)
+            }
         }
     }
 }

@@ -15,7 +15,7 @@ use afs_shared::task_plane::{
 };
 use anyhow::{Context, Result, anyhow};
 use franka::model::{Frame, Model};
-use franka::{ActiveTorqueControl, Robot, RobotState, Torques, motion_finished};
+use franka::{ActiveTorqueControl, FrankaError, Robot, RobotState, Torques, motion_finished};
 use hdrhistogram::Histogram;
 use nalgebra::{Matrix3, Vector3};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -116,16 +116,44 @@ impl Fr3 {
     }
 }
 
+/// The servo's exit status when the robot was lost ([`RobotLost`]): the supervisor ends the run,
+/// naming it, instead of restarting the servo against a robot that is not there.
+pub const ROBOT_LOST_EXIT: u8 = 3;
+
+/// The robot stopped answering: no state within franka-rs's UDP timeout (1 s) during a motion,
+/// or no answer to a restarted servo. What went wrong is in the words.
+#[derive(Debug)]
+pub struct RobotLost(pub String);
+
+impl std::fmt::Display for RobotLost {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "the robot was lost: {}", self.0)
+    }
+}
+
+impl std::error::Error for RobotLost {}
+
+/// Whether `e`, or an error it wraps, is a [`RobotLost`].
+#[must_use]
+pub fn is_robot_lost(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| c.is::<RobotLost>())
+}
+
 /// The next packet of a torque-control loop: the robot's state and its time since the last
 /// packet (s; more than a cycle when cycles were missed).
 ///
 /// # Errors
-/// The robot ended the motion (its reason named).
+/// The robot ended the motion (its reason named), or sent nothing for 1 s ([`RobotLost`]).
 pub fn next_packet(control: &mut ActiveTorqueControl<'_>) -> Result<(RobotState, f64)> {
     control
         .read_once()
         .map(|(state, period)| (state, period.as_secs_f64()))
-        .map_err(|e| anyhow!("[robot] the motion ended: {e}"))
+        .map_err(|e| match e {
+            FrankaError::Network(why) => anyhow::Error::new(RobotLost(format!(
+                "it sent no state for 1 s ({why}); check that it is on and that its network is up"
+            ))),
+            other => anyhow!("[robot] the motion ended: {other}"),
+        })
 }
 
 /// What a hold measured.

@@ -65,6 +65,9 @@ pub enum Ended {
     Restarting,
     /// Not to be started again (its policy, or its restart budget spent).
     Stays,
+    /// The servo found the robot gone ([`crate::robot::ROBOT_LOST_EXIT`]): not started again,
+    /// and the run is over.
+    RobotLost,
 }
 
 /// A supervised process.
@@ -297,7 +300,10 @@ impl Proc {
         self.held = false;
         let ok = st.code() == Some(0);
         let servo_finished = self.board == Some(Board::Servo) && ok;
+        let robot_lost = self.board == Some(Board::Servo)
+            && st.code() == Some(i32::from(crate::robot::ROBOT_LOST_EXIT));
         let restart = !servo_finished
+            && !robot_lost
             && policy::restarts(
                 self.spec.restart,
                 ok,
@@ -342,7 +348,11 @@ impl Proc {
                 "afs: {} ended ({}) and will not be restarted",
                 self.spec.name, record.status
             );
-            Ended::Stays
+            if robot_lost {
+                Ended::RobotLost
+            } else {
+                Ended::Stays
+            }
         };
         self.exits.push(record);
         ended

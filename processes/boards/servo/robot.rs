@@ -14,7 +14,7 @@ use super::ports::Ports;
 use super::timing::{Timing, publish_stats};
 use super::{ServoArgs, ServoEnd};
 use crate::boards::Startup;
-use crate::robot::{CYCLE_S, Session, next_packet};
+use crate::robot::{CYCLE_S, RobotLost, Session, next_packet};
 use crate::stack::RobotTable;
 use crate::{hist, rt};
 use afs_shared::config::SimConfig;
@@ -28,7 +28,7 @@ use afs_shared::scenario::{DriverState, Scenario, ScenarioDriver};
 use afs_shared::sensor::Wrench;
 use afs_shared::servo::{ServoCore, TaskDrive, to_plane};
 use afs_shared::watchdog::{GateCounters, GateParams, RobotClockAge, SampleGate, Verdict};
-use anyhow::{Result, anyhow};
+use anyhow::{Context, Result, anyhow};
 use franka::{RobotState, Torques, motion_finished};
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -55,7 +55,7 @@ pub fn run(args: &ServoArgs, table: &RobotTable, stop: &AtomicBool) -> Result<Se
     for w in &rtr.warnings {
         eprintln!("afs-servo: warning: {w}");
     }
-    let Some(mut session) = connect(table, args.startup_timeout_s, stop)? else {
+    let Some(mut session) = connect(table, args.resume, args.startup_timeout_s, stop)? else {
         return Ok(ServoEnd::Stopped);
     };
     let gate_params = GateParams {
@@ -117,7 +117,9 @@ pub fn run(args: &ServoArgs, table: &RobotTable, stop: &AtomicBool) -> Result<Se
     board.stats.flags.set(LoopFlags::SCHED_FIFO, rtr.fifo);
     board.stats.flags.set(LoopFlags::MLOCKED, rtr.mlocked);
     board.stats.flags.set(LoopFlags::PINNED, rtr.pinned);
-    let end = board.drive(&mut session, stop)?;
+    let end = board
+        .drive(&mut session, stop)
+        .with_context(|| format!("[robot] address = \"{}\"", table.address))?;
     board.finish(args.histograms.as_deref())?;
     Ok(end)
 }
@@ -161,14 +163,31 @@ fn controller(
     Ok((servo, driver))
 }
 
+/// How long a restarted servo asks the robot again before it counts as lost (s): the robot
+/// answered its predecessor, so it is up, and takes a new client at once.
+pub const RESUME_CONNECT_S: f64 = 2.0;
+
 /// The robot's session, once it answers: a robot the graph starts itself (the simulated cell)
 /// comes up beside the servo, so a robot that does not answer is asked again every 0.2 s for
-/// `timeout_s`; then the last refusal is the error. None if stopped first.
-fn connect(table: &RobotTable, timeout_s: f64, stop: &AtomicBool) -> Result<Option<Session>> {
+/// `timeout_s`; then the last refusal is the error. A restarted servo (`resumed`) asks for
+/// [`RESUME_CONNECT_S`] only, and then the robot was lost ([`RobotLost`]). None if stopped
+/// first.
+fn connect(
+    table: &RobotTable,
+    resumed: bool,
+    timeout_s: f64,
+    stop: &AtomicBool,
+) -> Result<Option<Session>> {
     let t0 = std::time::Instant::now();
+    let timeout_s = if resumed { RESUME_CONNECT_S } else { timeout_s };
     loop {
         match Session::open(table) {
             Ok(s) => return Ok(Some(s)),
+            Err(e) if resumed && t0.elapsed().as_secs_f64() >= timeout_s => {
+                return Err(anyhow::Error::new(RobotLost(format!(
+                    "it did not answer the restarted servo for {timeout_s} s ({e:#})"
+                ))));
+            }
             Err(e) if t0.elapsed().as_secs_f64() >= timeout_s => return Err(e),
             Err(_) if stop.load(Ordering::Relaxed) => return Ok(None),
             Err(_) => std::thread::sleep(std::time::Duration::from_millis(200)),
@@ -204,7 +223,13 @@ impl RobotBoard {
         let Session { fr3, cycle, .. } = session;
         let mut control = fr3.torque_control()?;
         loop {
-            let (state, dt) = next_packet(&mut control)?;
+            // A robot that stops sending while the stack stops (the supervisor ends a run whose
+            // cell died) is not an error of the servo's.
+            let (state, dt) = match next_packet(&mut control) {
+                Ok(p) => p,
+                Err(_) if stop.load(Ordering::Relaxed) => return Ok(ServoEnd::Stopped),
+                Err(e) => return Err(e),
+            };
             let now = rt::monotonic_ns();
             if dt > 1.5 * CYCLE_S {
                 self.stats.misses += ((dt / CYCLE_S).round() as u64).saturating_sub(1);

@@ -53,6 +53,9 @@ pub enum RunEnd {
     WallLimit,
     /// The servo gave up (its restart limit).
     ServoGaveUp,
+    /// The robot was lost: the simulated cell's process ended, or the servo found the robot
+    /// silent ([`crate::robot::ROBOT_LOST_EXIT`]).
+    RobotLost,
 }
 
 impl RunEnd {
@@ -63,6 +66,7 @@ impl RunEnd {
             RunEnd::Interrupted => "interrupted by a signal",
             RunEnd::WallLimit => "stopped by the wall-time limit",
             RunEnd::ServoGaveUp => "stopped: the servo gave up",
+            RunEnd::RobotLost => "stopped: the robot was lost",
         }
     }
 }
@@ -119,6 +123,8 @@ pub struct Supervisor {
     servo_view: ServoView,
     /// The first tick of a restarted servo (None until its first sample arrives).
     servo_resumes_at: Option<u64>,
+    /// Why the robot was lost, once it was (the run then ends).
+    robot_lost: Option<String>,
     genuine: Option<WrenchSample>,
     scenario_name: &'static str,
 }
@@ -162,6 +168,7 @@ impl Supervisor {
             last_time_s: 0.0,
             servo_view: ServoView::default(),
             servo_resumes_at: None,
+            robot_lost: None,
             genuine: None,
             scenario_name: scenario.kind.name(),
         }
@@ -256,6 +263,11 @@ impl Supervisor {
                     break;
                 }
             }
+            if let Some(why) = self.robot_lost.take() {
+                eprintln!("afs: the robot was lost ({why}); stopping the run");
+                self.end = Some(RunEnd::RobotLost);
+                break;
+            }
             let servo_failed = self
                 .procs
                 .iter()
@@ -295,6 +307,17 @@ impl Supervisor {
                     let _ = ipc::census(&prefix, true);
                 });
                 servo_done |= ended == Ended::ServoFinished;
+                // The simulated robot's process is the robot: nothing runs the scenario on
+                // without it (a real robot's loss is the servo's to find).
+                let cell = p.spec.name == crate::stack::cell::CELL_PROCESS
+                    && self.launch.cell_file.is_some();
+                if ended == Ended::RobotLost || (cell && ended == Ended::Stays) {
+                    self.robot_lost = Some(format!(
+                        "process '{}' ended: {}",
+                        p.spec.name,
+                        p.exits.last().map_or("", |e| e.status.as_str())
+                    ));
+                }
                 continue;
             }
             if let Some(b) = p.board {
