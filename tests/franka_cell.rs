@@ -131,15 +131,18 @@ fn afs_holds_franky_sims_fr3_over_fci() {
     assert!(r["trip"].is_null(), "{r}");
 }
 
-/// `afs run` on the stack with its cell (the graph starts it), the servo killed once
-/// (`afs chaos --faults kill-servo --kills 1`): the supervisor restarts it, it reconnects to
-/// the robot and resumes the scenario from the world blackboard, and every correctness check
-/// and force target passes: the normal force within 1.5× the preload in the 0.5 s after the
+/// `afs run` on the stack with its cell (the graph starts it), the servo and then the sensor
+/// killed once (`afs chaos --faults kill-servo,kill-sensor --in-turn`): the supervisor
+/// restarts the servo, which reconnects to the robot and resumes the scenario from the world
+/// blackboard; without the sensor, the servo holds by impedance 2 ms of the robot's time after
+/// the sensor fell silent (its force-age limit, `--max-force-age-ms 2`; one cycle's margin)
+/// and takes the restarted sensor's data up again. Every correctness check and force target
+/// passes: the normal force within 2× the preload, and 1.5× in the 0.5 s after the servo's
 /// restart, no tick without contact, the tangent error's RMS within 1°. The controller's
-/// samples are the scenario's 6 s once, in order; every world sample delivered; the sensor's
-/// records all received; nothing left behind.
+/// samples are the scenario's 6 s once, in order; every world sample delivered; nothing left
+/// behind.
 #[test]
-fn the_servo_killed_on_the_cell_comes_back() {
+fn the_servo_and_the_sensor_killed_on_the_cell_come_back() {
     if !has_franky_sim() {
         return;
     }
@@ -148,9 +151,10 @@ fn the_servo_killed_on_the_cell_comes_back() {
         .args([
             "chaos",
             "--faults",
-            "kill-servo",
+            "kill-servo,kill-sensor",
+            "--in-turn",
             "--kills",
-            "1",
+            "2",
             "--duration",
             "6",
             "--json",
@@ -178,6 +182,17 @@ fn the_servo_killed_on_the_cell_comes_back() {
         .find(|p| p["name"] == "servo")
         .expect("the servo's record");
     assert_eq!(servo["restarts"], 1, "{servo}");
+    let sensor = s["processes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["name"] == "sensor")
+        .expect("the sensor's record");
+    assert_eq!(sensor["restarts"], 1, "{sensor}");
+    let faults = &s["faults"];
+    assert!(faults["safe_entries"].as_u64() >= Some(1), "{faults}");
+    let hold_ms = faults["safe_after_silence_ms_max"].as_f64().unwrap();
+    assert!(hold_ms <= 3.0, "{faults}");
     assert_eq!(s["samples"]["servo_lost"], 0, "{}", s["samples"]);
     // Resumed, not started again: the controller's samples are the scenario's 6 s once, in
     // order (a servo started afresh sent 10 100, 8 199 of them out of order).
@@ -186,9 +201,6 @@ fn the_servo_killed_on_the_cell_comes_back() {
     let received = samples["servo_received"].as_u64().unwrap();
     assert!(received.abs_diff(6000) <= 5, "{samples}");
     assert_eq!(samples["plant_lost"], 0, "{samples}");
-    let rdt = &s["sensor"]["rdt"];
-    assert_eq!(rdt["lost"], 0, "{rdt}");
-    assert!(rdt["records"].as_u64().unwrap() > 1000, "{rdt}");
     let tangent = s["checks"]
         .as_array()
         .unwrap()

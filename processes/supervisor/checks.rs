@@ -101,6 +101,7 @@ pub(super) fn run_checks(i: &Inputs<'_>) -> Vec<Check> {
                     .procs
                     .iter()
                     .any(|p| p.board == Some(Board::Servo) && p.restarts > 0),
+                robot: i.robot,
             }),
         );
     }

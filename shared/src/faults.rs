@@ -444,6 +444,12 @@ pub struct FaultFigures {
     /// Longest such time over every entry, those with the servo stalled included (ms).
     #[serde(deserialize_with = "crate::nan::or_null")]
     pub safe_after_last_good_ms_max_all: f64,
+    /// Longest time, on the servo's own clock (its samples' `time_s`: the simulated time, or a
+    /// robot's), from the first tick that found no new force sample to the first tick in the
+    /// safe state, over every entry (ms): the servo's reaction to a silent sensor, whatever the
+    /// wall clock did (a simulated robot's time runs slower than it).
+    #[serde(default, deserialize_with = "crate::nan::or_null")]
+    pub safe_after_silence_ms_max: f64,
     /// Largest true normal force after the settling time (N), outside the
     /// [`SERVO_RESTART_TICKS`] after each servo restart.
     #[serde(deserialize_with = "crate::nan::or_null")]
@@ -476,6 +482,13 @@ pub struct FaultMonitor {
     last_tick_ns: Option<u64>,
     /// Longest tick-to-tick interval since the last tick with good data (ns).
     gap_since_good_ns: u64,
+    /// A tick this much later than the one before is the servo's own stall (ns).
+    stall_ns: u64,
+    /// The newest force sample's number, and the servo's time of the first tick without a newer
+    /// one (s; None while each tick has a new one).
+    newest_seq: Option<u64>,
+    silent_from_s: Option<f64>,
+    silence_max_s: f64,
     entries: u64,
     stalled_entries: u64,
     latency_sum_ns: u64,
@@ -500,6 +513,10 @@ impl FaultMonitor {
             was_safe: false,
             last_tick_ns: None,
             gap_since_good_ns: 0,
+            stall_ns: SERVO_STALL_NS,
+            newest_seq: None,
+            silent_from_s: None,
+            silence_max_s: 0.0,
             entries: 0,
             stalled_entries: 0,
             latency_sum_ns: 0,
@@ -512,6 +529,15 @@ impl FaultMonitor {
             non_finite: 0,
             force_max_abs: 0.0,
         }
+    }
+
+    /// For a servo ticking every `period_ns`: a tick more than five periods after the one before
+    /// is its own stall (at least [`SERVO_STALL_NS`], five ticks at 10 kHz; 5 ms at a robot's
+    /// 1 kHz).
+    #[must_use]
+    pub fn with_period_ns(mut self, period_ns: u64) -> Self {
+        self.stall_ns = SERVO_STALL_NS.max(period_ns.saturating_mul(5));
+        self
     }
 
     /// One tick's samples (the same tick).
@@ -528,7 +554,9 @@ impl FaultMonitor {
             let latency = s.tick_ns.saturating_sub(good);
             self.entries += 1;
             self.latency_max_all_ns = self.latency_max_all_ns.max(latency);
-            if self.gap_since_good_ns > SERVO_STALL_NS {
+            let silent = s.time_s - self.silent_from_s.unwrap_or(s.time_s);
+            self.silence_max_s = self.silence_max_s.max(silent);
+            if self.gap_since_good_ns > self.stall_ns {
                 self.stalled_entries += 1;
             } else {
                 self.latency_sum_ns += latency;
@@ -536,6 +564,14 @@ impl FaultMonitor {
             }
         }
         self.was_safe = safe;
+        let fresh =
+            s.flags.contains(ServoFlags::FORCE_VALID) && self.newest_seq != Some(s.wrench_seq);
+        if fresh {
+            self.newest_seq = Some(s.wrench_seq);
+            self.silent_from_s = None;
+        } else if self.silent_from_s.is_none() {
+            self.silent_from_s = Some(s.time_s);
+        }
         if s.flags.contains(ServoFlags::FORCE_VALID) {
             self.last_good_ns = Some(s.wrench_sample_ns);
             self.gap_since_good_ns = 0;
@@ -577,6 +613,9 @@ impl FaultMonitor {
                 self.latency_sum_ns as f64 * 1e-6 / on_time as f64
             },
             safe_after_last_good_ms_max_all: self.latency_max_all_ns as f64 * 1e-6,
+            // To the microsecond: the servo's time is a sum of periods (a robot's in whole
+            // milliseconds), whose rounding must not make 2 ms read as 2.000000000000668.
+            safe_after_silence_ms_max: (self.silence_max_s * 1e6).round() * 1e-3,
             normal_force_max_n: self.normal_max,
             normal_force_max_over_preload: self.normal_max / self.preload_n,
             normal_force_max_at_s: self.normal_max_at,

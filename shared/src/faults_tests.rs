@@ -271,3 +271,39 @@ fn plans_that_cannot_fit_name_the_shortest_run() {
         Err(PlanError::Spans)
     );
 }
+
+/// A robot's servo at 1 kHz whose sensor sends a new sample each tick until tick 99 and none
+/// after: with force data valid up to 2 ms old, the servo holds from tick 102. The hold came
+/// 2 ms (of the servo's own time) after the first tick without a new sample; on the wall
+/// clock, where a simulated robot's ticks came 1.7 ms apart, that is 3.4 ms and more. Ticks
+/// 1.7 ms apart are a 1-kHz servo's pace, not its stall: with its period given, the entry is on
+/// time; without, a 10-kHz servo's limit counts it as stalled.
+#[test]
+fn a_robot_servo_holds_2_ms_after_the_sensor_falls_silent() {
+    let run = |period_ns: Option<u64>| {
+        let mut m = FaultMonitor::new(2.5, 0.0);
+        if let Some(p) = period_ns {
+            m = m.with_period_ns(p);
+        }
+        for seq in 0..200u64 {
+            let (p, mut s) = tick(seq, seq < 102, seq >= 102, 0);
+            s.tick_ns = 1_000_000_000 + seq * 1_700_000;
+            s.time_s = seq as f64 * 1e-3;
+            s.wrench_seq = seq.min(99);
+            s.wrench_sample_ns = 1_000_000_000 + seq.min(99) * 1_700_000 - 300_000;
+            m.push(&p, &s);
+        }
+        m.figures()
+    };
+    let f = run(Some(1_000_000));
+    assert_eq!(
+        (f.safe_entries, f.safe_entries_servo_stalled),
+        (1, 0),
+        "{f:?}"
+    );
+    assert!((f.safe_after_silence_ms_max - 2.0).abs() < 1e-9, "{f:?}");
+    // Tick 102 at 173.4 ms; the last sample taken at 168.3 − 0.3 ms.
+    assert!((f.safe_after_last_good_ms_max - 5.4).abs() < 1e-9, "{f:?}");
+    let g = run(None);
+    assert_eq!(g.safe_entries_servo_stalled, 1, "{g:?}");
+}

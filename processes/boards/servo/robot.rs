@@ -316,7 +316,13 @@ impl RobotBoard {
         if self.servo.is_safe() {
             self.stats.safe_ticks += 1;
         }
-        let reading = used.map_or_else(Wrench::default, |(w, _)| w.wrench().tared(self.last_tare));
+        // The world's force is the sensor's newest reading: while the sensor is silent, its last
+        // one (the servo's sample then says the controller had none: no FORCE_VALID). A world
+        // sample of zero force would count the outage as the tool off the part.
+        let reading = used
+            .map(|(w, _)| w)
+            .or_else(|| self.gate.newest().copied())
+            .map_or_else(Wrench::default, |w| w.wrench().tared(self.last_tare));
         let mut p = plant_sample(&self.cfg, &out.planar, reading, self.seq, self.time_s);
         p.tick_ns = now;
         p.publish_ns = rt::monotonic_ns();

@@ -149,7 +149,8 @@ impl Supervisor {
             injector: None,
             link_cut: None,
             monitor: scenario.monitor(),
-            faults: FaultMonitor::new(nominal_force_n(scenario), FAULT_SETTLE_S),
+            faults: FaultMonitor::new(nominal_force_n(scenario), FAULT_SETTLE_S)
+                .with_period_ns((1e9 / scenario.cfg.servo.rate_hz).round() as u64),
             steady: [None, None],
             joiner: Joiner::default(),
             stats: None,
