@@ -70,7 +70,7 @@ fn a_foxglove_client_receives_what_the_recording_holds_and_a_stalled_one_disturb
             "--scenario",
             "surface-tracking",
             "--duration",
-            "8",
+            "5",
             "--record",
             rec.to_str().unwrap(),
             "--foxglove",
@@ -204,7 +204,8 @@ fn a_foxglove_client_receives_what_the_recording_holds_and_a_stalled_one_disturb
         (last["adoptions"].as_u64(), last["provisional"].as_bool()),
         (Some(0), Some(false))
     );
-    assert!(last["seq"].as_u64().unwrap() > 50_000, "{last}");
+    // To the run's end (5 s at 10 kHz): within its last half second.
+    assert!(last["seq"].as_u64().unwrap() >= 45_000, "{last}");
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
     let _ = std::fs::remove_dir_all(&dir);
 }
