@@ -27,6 +27,14 @@ fn has_franky_sim() -> bool {
     has
 }
 
+/// The record of the process `name` in a run's JSON.
+fn process<'a>(run: &'a serde_json::Value, name: &str) -> &'a serde_json::Value {
+    run["processes"]
+        .as_array()
+        .and_then(|a| a.iter().find(|p| p["name"] == name))
+        .unwrap_or_else(|| panic!("no record of process '{name}': {run}"))
+}
+
 /// A loopback address of this test process's own.
 fn host() -> String {
     format!("127.0.0.{}", 100 + std::process::id() % 100)
@@ -175,19 +183,9 @@ fn the_servo_and_the_sensor_killed_on_the_cell_come_back() {
             assert_eq!(c["pass"], true, "{c}");
         }
     }
-    let servo = s["processes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|p| p["name"] == "servo")
-        .expect("the servo's record");
+    let servo = process(&s, "servo");
     assert_eq!(servo["restarts"], 1, "{servo}");
-    let sensor = s["processes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|p| p["name"] == "sensor")
-        .expect("the sensor's record");
+    let sensor = process(&s, "sensor");
     assert_eq!(sensor["restarts"], 1, "{sensor}");
     let faults = &s["faults"];
     assert!(faults["safe_entries"].as_u64() >= Some(1), "{faults}");
@@ -257,12 +255,7 @@ fn a_killed_cell_ends_the_run_naming_the_robot() {
     );
     let s: serde_json::Value = serde_json::from_slice(&out.stdout).expect("the run's JSON");
     assert_eq!(s["end"], "robot_lost", "{err}");
-    let servo = s["processes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|p| p["name"] == "servo")
-        .expect("the servo's record");
+    let servo = process(&s, "servo");
     assert_eq!(servo["restarts"], 0, "{servo}");
     assert_eq!(
         s["cleanup"]["left"],
