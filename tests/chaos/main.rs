@@ -149,7 +149,13 @@ fn sensor_killed_or_frozen_the_servo_stays_safe_and_recovers() {
         "before the stall limit: {frozen:?}"
     );
     let sensor = process(&r, "sensor");
-    assert_eq!((sensor.restarts, sensor.stalls_killed), (3, 1));
+    assert_eq!(
+        (sensor.restarts, sensor.stalls_killed),
+        (3, 1),
+        "{:#?}\n{}",
+        sensor.exits,
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert_eq!(r.stack.tracking.ticks_without_contact, 0);
     assert!(leftovers(&p).is_empty(), "{:?}", leftovers(&p));
 }
