@@ -250,6 +250,11 @@ impl Supervisor {
                 .is_some_and(crate::chaos::Injector::bringing_back);
             if finished.is_none() || recovering {
                 self.inject();
+                // The injector may take a while (the steady footprint reads /proc and the
+                // shared-memory files: over 100 ms on a loaded machine), and the streams went
+                // unread meanwhile: read them again, or the stall policy below takes the
+                // supervisor's own pause for a board's silence.
+                self.poll_streams();
             }
             if self.watch_children() {
                 finished = Some(Instant::now());
