@@ -201,26 +201,21 @@ impl ChaosReport {
             not_back as f64,
             0.0,
         ));
-        if f.safe_entries > 0 && m.robot {
-            checks.push(
-                Check::at_most(
+        if f.safe_entries > 0 {
+            let (id, name, value) = if m.robot {
+                (
                     "safe_after_silence_ms",
                     "worst robot time from the sensor's silence to the impedance hold (ms)",
                     f.safe_after_silence_ms_max,
-                    2.0,
                 )
-                .target(),
-            );
-        } else if f.safe_entries > 0 {
-            checks.push(
-                Check::at_most(
+            } else {
+                (
                     "safe_after_last_good_ms",
                     "worst time from the last good force sample to the safe state (ms)",
                     f.safe_after_last_good_ms_max,
-                    2.0,
                 )
-                .target(),
-            );
+            };
+            checks.push(Check::at_most(id, name, value, 2.0).target());
         }
         checks.push(
             Check::at_most(

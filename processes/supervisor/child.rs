@@ -65,8 +65,9 @@ pub enum Ended {
     Restarting,
     /// Not to be started again (its policy, or its restart budget spent).
     Stays,
-    /// The servo found the robot gone ([`crate::robot::ROBOT_LOST_EXIT`]): not started again,
-    /// and the run is over.
+    /// The robot is gone: the run's robot process (the simulated cell) ended, or the servo
+    /// found the robot silent ([`crate::robot::ROBOT_LOST_EXIT`]). Not started again, and the
+    /// run is over.
     RobotLost,
 }
 
@@ -104,6 +105,9 @@ pub struct Proc {
     first_spawn_ns: u64,
     /// The first start's timeline.
     pub first_start: Timeline,
+    /// It is the run's robot (the simulated cell, started with `--cell-config`): nothing runs
+    /// the scenario on without it, so its end is the robot lost, never restarted.
+    robot: bool,
 }
 
 fn exit_code(st: &ExitStatus) -> i32 {
@@ -140,6 +144,7 @@ impl Proc {
             injected_budget: 0,
             first_spawn_ns: 0,
             first_start: Timeline::default(),
+            robot: false,
         })
     }
 
@@ -168,6 +173,7 @@ impl Proc {
             && let Some(f) = &l.cell_file
         {
             cmd.arg("--cell-config").arg(f);
+            self.robot = true;
         }
         cmd.args(&self.spec.args);
         cmd.stdin(Stdio::null()).stdout(Stdio::null());
@@ -300,8 +306,9 @@ impl Proc {
         self.held = false;
         let ok = st.code() == Some(0);
         let servo_finished = self.board == Some(Board::Servo) && ok;
-        let robot_lost = self.board == Some(Board::Servo)
-            && st.code() == Some(i32::from(crate::robot::ROBOT_LOST_EXIT));
+        let robot_lost = self.robot
+            || (self.board == Some(Board::Servo)
+                && st.code() == Some(i32::from(crate::robot::ROBOT_LOST_EXIT)));
         let restart = !servo_finished
             && !robot_lost
             && policy::restarts(

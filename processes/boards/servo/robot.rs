@@ -183,12 +183,15 @@ fn connect(
     loop {
         match Session::open(table) {
             Ok(s) => return Ok(Some(s)),
-            Err(e) if resumed && t0.elapsed().as_secs_f64() >= timeout_s => {
-                return Err(anyhow::Error::new(RobotLost(format!(
-                    "it did not answer the restarted servo for {timeout_s} s ({e:#})"
-                ))));
+            Err(e) if t0.elapsed().as_secs_f64() >= timeout_s => {
+                return Err(if resumed {
+                    anyhow::Error::new(RobotLost(format!(
+                        "it did not answer the restarted servo for {timeout_s} s ({e:#})"
+                    )))
+                } else {
+                    e
+                });
             }
-            Err(e) if t0.elapsed().as_secs_f64() >= timeout_s => return Err(e),
             Err(_) if stop.load(Ordering::Relaxed) => return Ok(None),
             Err(_) => std::thread::sleep(std::time::Duration::from_millis(200)),
         }

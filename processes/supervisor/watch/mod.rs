@@ -313,11 +313,7 @@ impl Supervisor {
                     let _ = ipc::census(&prefix, true);
                 });
                 servo_done |= ended == Ended::ServoFinished;
-                // The simulated robot's process is the robot: nothing runs the scenario on
-                // without it (a real robot's loss is the servo's to find).
-                let cell = p.spec.name == crate::stack::cell::CELL_PROCESS
-                    && self.launch.cell_file.is_some();
-                if ended == Ended::RobotLost || (cell && ended == Ended::Stays) {
+                if ended == Ended::RobotLost {
                     self.robot_lost = Some(format!(
                         "process '{}' ended: {}",
                         p.spec.name,
