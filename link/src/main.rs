@@ -83,6 +83,11 @@ struct Cli {
     /// Longest wait between two rounds when nothing arrives from the other host (ms).
     #[arg(long, default_value_t = 1)]
     poll_ms: u64,
+    /// How often the board looks for services that appeared or left on either host, once its
+    /// first seconds are over (ms; every 100 ms before that). Each look reads every local
+    /// service's description (docs/link.md, *Discovery*).
+    #[arg(long, default_value_t = 500)]
+    discover_ms: u64,
     /// Write the board's summary (JSON) here when it stops.
     #[arg(long)]
     summary: Option<PathBuf>,
@@ -177,6 +182,12 @@ fn run(cli: &Cli) -> Result<Summary> {
     if cli.poll_ms == 0 || cli.poll_ms > 1000 {
         bail!("--poll-ms {} must be 1 to 1000", cli.poll_ms);
     }
+    if !(FIRST_DISCOVERY_MS..=10_000).contains(&cli.discover_ms) {
+        bail!(
+            "--discover-ms {} must be {FIRST_DISCOVERY_MS} to 10000",
+            cli.discover_ms
+        );
+    }
     let r = afs::rt::setup(cli.common.priority, false, cli.common.cpu);
     for w in &r.warnings {
         eprintln!("afs-link: warning: {w}");
@@ -230,7 +241,8 @@ fn run(cli: &Cli) -> Result<Summary> {
         ..Default::default()
     };
     let mut ends = Ends::open(&node, cli.side)?;
-    let mut last_discovery = Instant::now() - Duration::from_secs(1);
+    let started = Instant::now();
+    let mut last_discovery = started - Duration::from_secs(1);
     let mut last_warning = Instant::now() - Duration::from_secs(10);
     let mut warn = |what: &str, e: &dyn std::fmt::Debug| {
         if last_warning.elapsed() > Duration::from_secs(5) {
@@ -249,7 +261,12 @@ fn run(cli: &Cli) -> Result<Summary> {
         let _ = listener.try_wait(|_| {});
         sum.waiting_s += t.elapsed().as_secs_f64();
         ends.pack(&mut sum);
-        if last_discovery.elapsed() >= Duration::from_millis(100) {
+        let period = if started.elapsed() < FIRST_SECONDS {
+            FIRST_DISCOVERY_MS
+        } else {
+            cli.discover_ms
+        };
+        if last_discovery.elapsed() >= Duration::from_millis(period) {
             last_discovery = Instant::now();
             if let Err(e) = link.discover() {
                 sum.discovery_errors += 1;
@@ -285,6 +302,10 @@ fn run(cli: &Cli) -> Result<Summary> {
     sum.bridged = !link.bridges().empty();
     Ok(sum)
 }
+
+/// Discovery every 100 ms in the board's first seconds, while the stack's services appear.
+const FIRST_DISCOVERY_MS: u64 = 100;
+const FIRST_SECONDS: Duration = Duration::from_secs(5);
 
 /// Rounds of the tunnel (2 ms apart) a stopping board runs to carry its last batch: 0.3 s,
 /// four times the worst batch latency seen on a loaded CI machine (76 ms).
@@ -428,6 +449,8 @@ fn send_batch(
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // The tunnel's own account of its bridges, for a user tracing the link: IOX2_LOG_LEVEL=trace.
+    set_log_level_from_env_or(LogLevel::Info);
     let result = run(&cli);
     // The last node of the prefix on this host leaves it clean (on a remote host there is no
     // supervisor to do it): iceoryx2 keeps the node counter, removed by name.

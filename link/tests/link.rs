@@ -194,6 +194,23 @@ fn the_link_board_and_afs_record_refuse_bad_input() {
         .unwrap();
     assert_refused(&out, &"poll 0", "--poll-ms");
     let out = Command::new(&link)
+        .args([
+            "--prefix",
+            "lkbad",
+            "--side",
+            "remote",
+            "--discover-ms",
+            "20",
+        ])
+        .args(["--listen", "tcp/127.0.0.1:7999"])
+        .output()
+        .unwrap();
+    assert_refused(
+        &out,
+        &"discovery every 20 ms",
+        "--discover-ms 20 must be 100 to 10000",
+    );
+    let out = Command::new(&link)
         .args(["--prefix", "lkbad", "--side", "remote"])
         .args(["--listen", "quic/127.0.0.1:7999"])
         .output()
