@@ -70,7 +70,7 @@ fn two_hosts(prefix: &str, args: &[&str]) -> Option<(i32, Value)> {
 fn the_estimator_on_another_host_serves_the_servo_and_the_record_has_no_gap() {
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let p = prefix("lk");
-    let Some((code, v)) = two_hosts(&p, &["--duration", "30"]) else {
+    let Some((code, v)) = two_hosts(&p, &["--duration", "20"]) else {
         return;
     };
     assert_eq!(code, 0, "{v:#}");
@@ -253,7 +253,7 @@ fn bench_link_measures_both_paths() {
             "bench",
             "link",
             "--duration",
-            "6",
+            "4",
             "--json",
             "--prefix",
             &p,
