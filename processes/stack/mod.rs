@@ -207,6 +207,7 @@ impl StackFile {
         }
         if let Some(r) = &self.robot {
             r.check()?;
+            r.check_reach()?;
         }
         for role in [Board::Servo, Board::Sensor] {
             if self.spec(role).is_none() {

@@ -3,10 +3,12 @@
 //! Checked when the file is read, each bad entry named in one line; the servo board reads it
 //! again from the file the supervisor writes ([`read`]).
 
+use afs_shared::reach::{Pose, fr3_limits, fr3_starts, reach};
 use afs_shared::robot_guard::{Guard, GuardLimits};
-use afs_shared::task_plane::{FrameError, TaskPlane, check_rotation};
+use afs_shared::task_plane::{FrameError, Jacobian, Joints, TaskPlane, check_rotation};
 use anyhow::{Result, anyhow, bail};
-use nalgebra::{Matrix3, Vector3};
+use franka::model::{Frame, Model};
+use nalgebra::{Matrix3, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 
 /// The `[robot]` table.
@@ -109,6 +111,65 @@ impl RobotTable {
         }
         self.check_tool()?;
         self.guard()?;
+        Ok(())
+    }
+
+    /// The workspace box within the FR3's reach: its centre and its eight corners (x, y and
+    /// the normal offset of `[robot.limits] workspace_m`, in the plane at θ = 0) are each a
+    /// pose of the tool that the arm takes within its joint limits, by inverse kinematics on
+    /// franka-rs's FR3 model with this tool ([`afs_shared::reach`]; docs/franka.md, *The task
+    /// frame within reach*). Checked when a stack file is read, not by the servo, which reads
+    /// the table again on every (re)start.
+    ///
+    /// # Errors
+    /// The first point out of reach, with how far short the arm came.
+    pub fn check_reach(&self) -> Result<()> {
+        const IDENTITY: [f64; 16] = [
+            1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0,
+        ];
+        let plane = self.plane()?;
+        let model = Model::from_urdf(franka::model::FR3_URDF)
+            .map_err(|e| anyhow!("franka-rs's FR3 model does not load: {e}"))?;
+        let tool = self.tool.flange_to_tip;
+        let joints = |q: &Joints| -> [f64; 7] { std::array::from_fn(|i| q[i]) };
+        let pose = |q: &Joints| -> Pose {
+            let p = model.pose_q(Frame::EndEffector, &joints(q), &tool, &IDENTITY);
+            (
+                Matrix3::from_fn(|i, j| p[j * 4 + i]),
+                Vector3::new(p[12], p[13], p[14]),
+            )
+        };
+        let jacobian = |q: &Joints| {
+            Jacobian::from_column_slice(&model.zero_jacobian_q(
+                Frame::EndEffector,
+                &joints(q),
+                &tool,
+                &IDENTITY,
+            ))
+        };
+        let w = self.limits.workspace_m;
+        let mut points = vec![w.map(|r| 0.5 * (r[0] + r[1]))];
+        for x in w[0] {
+            for y in w[1] {
+                for z in w[2] {
+                    points.push([x, y, z]);
+                }
+            }
+        }
+        let limits = fr3_limits();
+        // The solution at the last point first: the box's poses lie close together.
+        let mut starts = vec![fr3_starts()[0]];
+        starts.extend(fr3_starts());
+        for (k, [x, y, z]) in points.into_iter().enumerate() {
+            let target = plane.pose(Vector2::new(x, y), 0.0, z);
+            match reach(pose, jacobian, &target, &starts, &limits) {
+                Ok(q) => starts[0] = q,
+                Err(m) => bail!(
+                    "[robot.task_frame] the FR3 cannot put the tool at x = {x} m, y = {y} m, {z} m off the plane, θ = 0 ({} of [robot.limits] workspace_m): it comes {m} within its joint limits; move origin_m towards the robot or shrink the workspace",
+                    if k == 0 { "the centre" } else { "a corner" }
+                ),
+            }
+        }
         Ok(())
     }
 

@@ -29,6 +29,7 @@ pub mod nan;
 pub mod plant;
 pub mod probe;
 pub mod rdt;
+pub mod reach;
 pub mod robot_cycle;
 pub mod robot_guard;
 pub mod scenario;

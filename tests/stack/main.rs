@@ -300,6 +300,41 @@ fn an_old_client_is_refused_and_one_attached_at_the_end_is_an_observer() {
 }
 
 /// Bad input gets one clear line and exit status 2, never a panic or a hang.
+/// Stack files with a `[robot]` table, in `dir`: a valid one naming a loopback port where
+/// nothing listens (the robot does not answer), one whose tool transform is not rigid, and
+/// one whose plane lies 0.25 m farther out, its workspace box's far corners out of the arm's
+/// reach.
+fn robot_tables(dir: &Path) -> [std::path::PathBuf; 3] {
+    // A [robot] table: a tool transform that is not rigid is named; a valid table naming a
+    // loopback port where nothing listens is refused because the robot does not answer.
+    let closed = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap();
+    let robot = |tip: &str| {
+        format!(
+            "{}\n[robot]\nkind = \"franka\"\naddress = \"{closed}\"\n[robot.task_frame]\n\
+                 origin_m = [0.45, 0.0, 0.2]\nx_axis = [1.0, 0.0, 0.0]\nnormal = [0.0, 0.0, 1.0]\n\
+                 [robot.tool]\nflange_to_tip = [{tip}]\nmass_kg = 0.7\n",
+            afs::stack::DEFAULT_STACK
+        )
+    };
+    let identity = "1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.1, 1.0";
+    let sheared = identity.replacen("0.0", "0.3", 1);
+    let robot_ok = dir.join("robot.toml");
+    std::fs::write(&robot_ok, robot(identity)).unwrap();
+    let robot_bad = dir.join("robot-bad.toml");
+    std::fs::write(&robot_bad, robot(&sheared)).unwrap();
+    // The plane 0.25 m farther out: its workspace box's far corners are out of the arm's reach.
+    let robot_far = dir.join("robot-far.toml");
+    std::fs::write(
+        &robot_far,
+        robot(identity).replace("origin_m = [0.45,", "origin_m = [0.70,"),
+    )
+    .unwrap();
+    [robot_ok, robot_bad, robot_far]
+}
+
 #[test]
 fn bad_input_is_refused_clearly() {
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
@@ -315,26 +350,7 @@ fn bad_input_is_refused_clearly() {
     .unwrap();
     let bare = dir.join("bare.toml");
     std::fs::write(&bare, "[servo]\ninertia_feedforward = false\n").unwrap();
-    // A [robot] table: a tool transform that is not rigid is named; a valid table naming a
-    // loopback port where nothing listens is refused because the robot does not answer.
-    let closed = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap();
-    let robot = |tip: &str| {
-        format!(
-            "{}\n[robot]\nkind = \"franka\"\naddress = \"{closed}\"\n[robot.task_frame]\n\
-             origin_m = [0.45, 0.0, 0.2]\nx_axis = [1.0, 0.0, 0.0]\nnormal = [0.0, 0.0, 1.0]\n\
-             [robot.tool]\nflange_to_tip = [{tip}]\nmass_kg = 0.7\n",
-            afs::stack::DEFAULT_STACK
-        )
-    };
-    let identity = "1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.1, 1.0";
-    let sheared = identity.replacen("0.0", "0.3", 1);
-    let robot_ok = dir.join("robot.toml");
-    std::fs::write(&robot_ok, robot(identity)).unwrap();
-    let robot_bad = dir.join("robot-bad.toml");
-    std::fs::write(&robot_bad, robot(&sheared)).unwrap();
+    let [robot_ok, robot_bad, robot_far] = robot_tables(&dir);
     let missing_bin = dir.join("missing.toml");
     // A board that cannot start fails the run after the prefix was claimed: it is given back.
     let missing_prefix = prefix("nobin");
@@ -405,6 +421,14 @@ fn bad_input_is_refused_clearly() {
                 robot_bad.display().to_string(),
             ],
             "flange_to_tip is not a rigid transform",
+        ),
+        (
+            vec![
+                "run".into(),
+                "--config".into(),
+                robot_far.display().to_string(),
+            ],
+            "the FR3 cannot put the tool at x = 0.15 m",
         ),
         (
             vec![

@@ -106,3 +106,37 @@ fn each_bad_entry_is_named() {
         assert!(e.contains(want), "wanted {want:?} in: {e}");
     }
 }
+
+/// The workspace box within reach: the good table's and the FR3 cell's (examples/
+/// stack-franka.toml) pass; a plane 0.25 m farther out, still within the datasheet's reach of
+/// its origin, is refused at its far corner, with how far short the arm came; so is the
+/// cell's plane with its box widened to the defaults (±0.15 m: the tool pointing down, 0.7 m
+/// out, the arm is 26 mm short).
+#[test]
+fn a_workspace_out_of_the_arms_reach_is_refused_at_its_corner() {
+    let t = table();
+    t.check_reach().unwrap();
+    let cell = read(std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/examples/stack-franka.toml"
+    )))
+    .unwrap();
+    cell.check_reach().unwrap();
+
+    let mut far = table();
+    far.task_frame.origin_m = [0.70, 0.0, 0.2];
+    far.check().unwrap();
+    let e = far.check_reach().unwrap_err().to_string();
+    assert!(
+        e.contains("[robot.task_frame] the FR3 cannot put the tool at x = 0.15 m")
+            && e.contains("a corner of [robot.limits] workspace_m")
+            && e.contains("mm and")
+            && e.contains("move origin_m towards the robot"),
+        "{e}"
+    );
+
+    let mut wide = cell;
+    wide.limits.workspace_m = [[-0.15, 0.15], [-0.15, 0.15], [-0.05, 0.05]];
+    let e = wide.check_reach().unwrap_err().to_string();
+    assert!(e.contains("x = 0.15 m, y = -0.15 m"), "{e}");
+}
