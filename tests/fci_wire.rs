@@ -6,7 +6,10 @@
 //! Skipped, saying why, when pylibfranka is not installed or the stub cannot bind its
 //! loopback address. `AFS_FCI_LAYOUT_OUT=FILE` keeps the layout for running the script by hand.
 
-use franka::wire::robot::{ControllerCommand, MoveRequest, RobotCommand, RobotState};
+use franka::wire::robot::{
+    Command as FciCommand, ControllerCommand, MoveRequest, RobotCommand, RobotState,
+    SetCollisionBehaviorRequest, SetLoadRequest,
+};
 use serde_json::{Value, json};
 use std::mem::{offset_of, size_of};
 use std::path::Path;
@@ -22,6 +25,22 @@ macro_rules! state_fields {
             "kind": $kind,
             "count": $count,
         })),*]
+    };
+}
+
+/// A setter's request as the check script reads it: its command number, its size and
+/// `(name, offset, count)` of each field (f64 arrays), in wire order.
+macro_rules! setter {
+    ($command:expr, $request:ty { $($name:ident: $count:expr),* $(,)? }) => {
+        json!({
+            "command": $command as u32,
+            "size": size_of::<$request>(),
+            "fields": [$(json!({
+                "name": stringify!($name),
+                "offset": offset_of!($request, $name),
+                "count": $count,
+            })),*],
+        })
     };
 }
 
@@ -53,6 +72,17 @@ fn franka_rs_layout() -> Value {
         "finished_offset": control + offset_of!(ControllerCommand, torque_command_finished),
         "urdf": franka::model::FR3_URDF,
         "state": state,
+        "setters": {
+            "collision": setter!(FciCommand::SetCollisionBehavior, SetCollisionBehaviorRequest {
+                lower_torque_thresholds_acceleration: 7, upper_torque_thresholds_acceleration: 7,
+                lower_torque_thresholds_nominal: 7, upper_torque_thresholds_nominal: 7,
+                lower_force_thresholds_acceleration: 6, upper_force_thresholds_acceleration: 6,
+                lower_force_thresholds_nominal: 6, upper_force_thresholds_nominal: 6,
+            }),
+            "load": setter!(FciCommand::SetLoad, SetLoadRequest {
+                m_load: 1, F_x_Cload: 3, I_load: 9,
+            }),
+        },
     })
 }
 
@@ -99,12 +129,22 @@ fn franka_rs_speaks_the_wire_franka_s_own_client_speaks() {
     let Some(r) = check(&franka_rs_layout(), "127.0.0.61", "agrees") else {
         return;
     };
-    for part in ["connect", "state", "move", "command", "error_recovery"] {
+    for part in [
+        "connect",
+        "state",
+        "move",
+        "command",
+        "error_recovery",
+        "collision",
+        "load",
+    ] {
         assert_eq!(r[part]["agrees"], true, "{part}: {r:#}");
     }
     assert_eq!(r["connect"]["refusal_names_version_10"], true, "{r:#}");
     assert_eq!(r["state"]["fields_compared"], 40, "{r:#}");
     assert_eq!(r["command"]["tau_as_written"], 21, "{r:#}");
+    assert_eq!(r["collision"]["fields_compared"], 8, "{r:#}");
+    assert_eq!(r["load"]["fields_compared"], 3, "{r:#}");
     assert_eq!(r["agrees"], true);
 }
 
@@ -122,6 +162,13 @@ fn a_layout_off_by_one_field_is_caught() {
         .find(|f| f["name"] == "q")
         .unwrap();
     q["offset"] = json!(q["offset"].as_u64().unwrap() + 4);
+    // The torque thresholds' upper and lower arrays swapped in SetCollisionBehavior.
+    let fields = layout["setters"]["collision"]["fields"]
+        .as_array_mut()
+        .unwrap();
+    let (lower, upper) = (fields[0]["offset"].clone(), fields[1]["offset"].clone());
+    fields[0]["offset"] = upper;
+    fields[1]["offset"] = lower;
     let Some(r) = check(&layout, "127.0.0.62", "off") else {
         return;
     };
@@ -134,6 +181,15 @@ fn a_layout_off_by_one_field_is_caught() {
             .unwrap()
             .iter()
             .any(|f| f == "q"),
+        "{r:#}"
+    );
+    assert_eq!(r["collision"]["agrees"], false, "{r:#}");
+    assert_eq!(
+        r["collision"]["mismatched"],
+        json!([
+            "lower_torque_thresholds_acceleration",
+            "upper_torque_thresholds_acceleration"
+        ]),
         "{r:#}"
     );
     assert_eq!(r["agrees"], false);

@@ -5,8 +5,8 @@ A stub robot, built from the layout given with --layout (JSON: the message sizes
 RobotState's field offsets, as franka-rs declares them; tests/fci_wire.rs writes it), serves pylibfranka
 (Franka's bindings of libfranka) on a loopback address. The stub fills every state field with
 its own distinct values and records what the client sends. The client connects, reads the
-state, runs a torque-control motion for a few cycles, finishes it and asks for an automatic
-error recovery. The report (JSON on stdout) says, message by message, whether the official
+state, sets the collision thresholds and the load, runs a torque-control motion for a few cycles, finishes
+it and asks for an automatic error recovery. The report (JSON on stdout) says, message by message, whether the official
 client read and wrote what the layout says:
 
 - connect: the request's payload size and version; the client accepts the reply as
@@ -14,7 +14,9 @@ client read and wrote what the layout says:
 - state: every RobotState field pylibfranka exposes, read back against what was written;
 - move: the request's size and its controller / motion-generator modes;
 - command: the datagrams' size, message_id, tau_J_d and the finished flag;
-- error_recovery: the request is answered and the client returns.
+- error_recovery: the request is answered and the client returns;
+- collision, load: SetCollisionBehavior's and SetLoad's command numbers, sizes and each
+  field's place.
 
 Exit 0 when every check agrees, 1 when one does not, 2 when pylibfranka is missing or the
 stub cannot bind (the report says which).
@@ -42,6 +44,17 @@ MOTION_STARTED, SUCCESS = 1, 0
 # ExternalController = 2, robot mode Idle = 1, Move = 2.
 STATE_MG_NONE, STATE_CTRL_EXTERNAL, ROBOT_IDLE, ROBOT_MOVE = 5, 2, 1, 2
 TORQUES = [0.5 * (i + 1) for i in range(7)]
+# What the client sets, each value distinct, by the request's field names. SetCollisionBehavior
+# in pylibfranka's four-array form: libfranka sends each array as both the acceleration and the
+# nominal threshold.
+COLLISION = {"lower_torque": [10.0 + i for i in range(7)], "upper_torque": [30.0 + i for i in range(7)],
+             "lower_force": [50.0 + i for i in range(6)], "upper_force": [70.0 + i for i in range(6)]}
+SETTERS = {
+    "collision": {f"{k}_thresholds_{when}": v for k, v in COLLISION.items()
+                  for when in ("acceleration", "nominal")},
+    "load": {"m_load": [1.25], "F_x_Cload": [0.01, 0.02, 0.03],
+             "I_load": [0.001 * (i + 1) for i in range(9)]},
+}
 
 
 def field_values(index, count):
@@ -99,6 +112,7 @@ def serve(address, layout, connect_status, out, at=None):
     tcp.settimeout(20.0)
     conn, peer = tcp.accept()
     conn.settimeout(20.0)
+    setters = {s["command"]: s for s in layout["setters"].values()}
     moving = threading.Event()
     stop = threading.Event()
     client = {}
@@ -157,6 +171,12 @@ def serve(address, layout, connect_status, out, at=None):
             elif command == GET_ROBOT_MODEL:
                 # The FR3 serves its URDF: a u8 status, then the text.
                 reply(command, command_id, struct.pack("<B", SUCCESS) + layout["urdf"].encode())
+            elif command in setters:
+                entry["fields"] = {
+                    f["name"]: list(struct.unpack_from(f"<{f['count']}d", payload, f["offset"]))
+                    for f in setters[command]["fields"]
+                    if f["offset"] + 8 * f["count"] <= len(payload)}
+                reply(command, command_id, struct.pack("<B", SUCCESS))
             elif command in (STOP_MOVE, ERROR_RECOVERY):
                 reply(command, command_id, struct.pack("<B", SUCCESS))
             report["requests"].append(entry)
@@ -177,6 +197,11 @@ def run_client(address, out):
         result["state"] = {name: list(getattr(state, name)) if hasattr(getattr(state, name), "__len__")
                            else getattr(state, name) for name in dir(state) if not name.startswith("_")
                            and isinstance(getattr(state, name), (float, int, list, tuple))}
+        robot.set_collision_behavior(COLLISION["lower_torque"], COLLISION["upper_torque"],
+                                     COLLISION["lower_force"], COLLISION["upper_force"])
+        load = SETTERS["load"]
+        robot.set_load(load["m_load"][0], load["F_x_Cload"], load["I_load"])
+        result["setters_returned"] = True
         control = robot.start_torque_control()
         for _ in range(20):
             control.readOnce()
@@ -286,7 +311,7 @@ def main():
         report["connect"]["refusal"] or "")
     checks = [report["connect"]["agrees"], report["connect"]["refusal_names_version_10"],
               report["state"]["agrees"], report["move"]["agrees"], report["command"]["agrees"],
-              report["error_recovery"]["agrees"]]
+              report["error_recovery"]["agrees"]] + [report[name]["agrees"] for name in SETTERS]
     report["agrees"] = all(checks)
     print(json.dumps(report, indent=1))
     return 0 if report["agrees"] else 1
@@ -338,6 +363,20 @@ def compare(layout, stub, client):
                                 "client_returned": client.get("returned", False)}
     report["error_recovery"]["agrees"] = (report["error_recovery"]["requests"] == 1
                                           and report["error_recovery"]["client_returned"])
+    # Each setter: its command's number and size, and each field where the layout puts it.
+    for name, sent in SETTERS.items():
+        setter = layout["setters"][name]
+        requests = by.get(setter["command"], [])
+        got = requests[0].get("fields", {}) if requests else {}
+        mismatched = [f["name"] for f in setter["fields"] if got.get(f["name"]) != sent[f["name"]]]
+        part = {"requests": len(requests),
+                "payload_size": requests[0]["payload_size"] if requests else None,
+                "fields_compared": len(got), "mismatched": mismatched,
+                "client_returned": client.get("setters_returned", False)}
+        part["agrees"] = (len(requests) == 1 and part["payload_size"] == setter["size"]
+                          and len(got) == len(setter["fields"]) and not mismatched
+                          and part["client_returned"])
+        report[name] = part
     return report
 
 
