@@ -131,8 +131,10 @@ fn afs_holds_franky_sims_fr3_over_fci() {
     assert!(r["trip"].is_null(), "{r}");
 }
 
-/// `afs run` on the stack with its cell (the graph starts it), the servo and then the sensor
-/// killed once (`afs chaos --faults kill-servo,kill-sensor --in-turn`): the supervisor
+/// `afs run` on the stack with its cell (the graph starts it), the servo, the estimator and
+/// then the sensor killed once (`afs chaos --faults kill-servo,kill-estimator,kill-sensor
+/// --in-turn`): the servo drops the dead estimator's connections (no stale file after the
+/// faults; they stayed until its end before 2026-12-08), the supervisor
 /// restarts the servo, which reconnects to the robot and resumes the scenario from the world
 /// blackboard; without the sensor, the servo holds by impedance 2 ms of the robot's time after
 /// the sensor fell silent (its force-age limit, `--max-force-age-ms 2`; one cycle's margin)
@@ -151,10 +153,10 @@ fn the_servo_and_the_sensor_killed_on_the_cell_come_back() {
         .args([
             "chaos",
             "--faults",
-            "kill-servo,kill-sensor",
+            "kill-servo,kill-estimator,kill-sensor",
             "--in-turn",
             "--kills",
-            "2",
+            "3",
             "--duration",
             "6",
             "--json",
@@ -177,6 +179,8 @@ fn the_servo_and_the_sensor_killed_on_the_cell_come_back() {
     }
     assert_eq!(process(&r, "servo").restarts, 1);
     assert_eq!(process(&r, "sensor").restarts, 1);
+    assert_eq!(process(&r, "estimator").restarts, 1);
+    assert!(check(&r, "stale_files_after_faults").pass, "{}", failed(&r));
     let f = &r.faults;
     assert!(f.safe_entries >= 1, "{f:?}");
     assert!(f.safe_after_silence_ms_max <= 3.0, "{f:?}");

@@ -112,6 +112,7 @@ pub fn run(args: &ServoArgs, table: &RobotTable, stop: &AtomicBool) -> Result<Se
         last_tare: first.tare(),
         ports,
         age: RobotClockAge::default(),
+        connections: rt::Every::new(rt::CONNECTIONS_EVERY_NS, rt::monotonic_ns()),
     };
     startup.send();
     board.stats.flags.set(LoopFlags::SCHED_FIFO, rtr.fifo);
@@ -217,6 +218,8 @@ struct RobotBoard {
     ports: Ports,
     /// Force data's age in the robot's time.
     age: RobotClockAge,
+    /// When to check the connections of ports that send rarely (every 0.1 s).
+    connections: rt::Every,
 }
 
 impl RobotBoard {
@@ -366,6 +369,11 @@ impl RobotBoard {
         self.stats.ticks += 1;
         if self.stats.ticks.is_multiple_of(1000) {
             self.publish_stats();
+        } else if self.link.is_idle() && self.connections.due(now) {
+            // Drop the connections of an estimator that died (a file pair per dead server)
+            // and connect a restarted one, as the planar board does: without it a killed or
+            // frozen estimator's connection files stayed until the servo's end.
+            self.link.update_connections();
         }
         let exec = rt::monotonic_ns().saturating_sub(now);
         hist::record(&mut self.timing.exec, exec);
