@@ -8,6 +8,7 @@
 //! same cycle from a [`Session`] (`boards/servo/robot.rs`).
 
 use crate::stack::robot::RobotTable;
+use afs_shared::reach::Pose;
 use afs_shared::robot_cycle::{ArmCycle, ArmCycleParams, ArmState};
 use afs_shared::robot_guard::HoldPose;
 use afs_shared::task_plane::{
@@ -90,19 +91,14 @@ impl Fr3 {
     pub fn arm_state(&self, s: &RobotState) -> ArmState {
         let m = &self.model;
         let (mass, com) = self.load;
-        let pose = m.pose_q(Frame::EndEffector, &s.q, &self.tool, &IDENTITY);
+        let (tool_rotation, tool_position_m) = tool_pose(m, &s.q, &self.tool);
         ArmState {
             q: Joints::from(s.q),
             dq: Joints::from(s.dq),
             last_command_nm: Joints::from(s.tau_J_d),
-            tool_rotation: Matrix3::from_fn(|i, j| pose[j * 4 + i]),
-            tool_position_m: Vector3::new(pose[12], pose[13], pose[14]),
-            jacobian: Jacobian::from_column_slice(&m.zero_jacobian_q(
-                Frame::EndEffector,
-                &s.q,
-                &self.tool,
-                &IDENTITY,
-            )),
+            tool_rotation,
+            tool_position_m,
+            jacobian: tool_jacobian(m, &s.q, &self.tool),
             mass: MassMatrix::from_column_slice(&m.mass_q(&s.q, &[0.0; 9], mass, &com)),
             coriolis: Joints::from(m.coriolis_q(
                 &s.q,
@@ -114,6 +110,28 @@ impl Fr3 {
             )),
         }
     }
+}
+
+/// The tool's pose in the base frame at joint positions `q` (rad), the tool `flange_to_tip`
+/// given as libfranka's `F_T_EE` (column-major). Allocates nothing.
+#[must_use]
+pub fn tool_pose(model: &Model, q: &[f64; 7], flange_to_tip: &[f64; 16]) -> Pose {
+    let p = model.pose_q(Frame::EndEffector, q, flange_to_tip, &IDENTITY);
+    (
+        Matrix3::from_fn(|i, j| p[j * 4 + i]),
+        Vector3::new(p[12], p[13], p[14]),
+    )
+}
+
+/// The zero Jacobian at the tool ([`tool_pose`]'s). Allocates nothing.
+#[must_use]
+pub fn tool_jacobian(model: &Model, q: &[f64; 7], flange_to_tip: &[f64; 16]) -> Jacobian {
+    Jacobian::from_column_slice(&model.zero_jacobian_q(
+        Frame::EndEffector,
+        q,
+        flange_to_tip,
+        &IDENTITY,
+    ))
 }
 
 /// The servo's exit status when the robot was lost ([`RobotLost`]): the supervisor ends the run,

@@ -3,11 +3,11 @@
 //! Checked when the file is read, each bad entry named in one line; the servo board reads it
 //! again from the file the supervisor writes ([`read`]).
 
-use afs_shared::reach::{Pose, fr3_limits, fr3_starts, reach};
+use afs_shared::reach::{fr3_limits, fr3_starts, reach};
 use afs_shared::robot_guard::{Guard, GuardLimits};
-use afs_shared::task_plane::{FrameError, Jacobian, Joints, TaskPlane, check_rotation};
+use afs_shared::task_plane::{FrameError, Joints, TaskPlane, check_rotation};
 use anyhow::{Result, anyhow, bail};
-use franka::model::{Frame, Model};
+use franka::model::Model;
 use nalgebra::{Matrix3, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -124,29 +124,14 @@ impl RobotTable {
     /// # Errors
     /// The first point out of reach, with how far short the arm came.
     pub fn check_reach(&self) -> Result<()> {
-        const IDENTITY: [f64; 16] = [
-            1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0,
-        ];
+        use crate::robot::{tool_jacobian, tool_pose};
         let plane = self.plane()?;
         let model = Model::from_urdf(franka::model::FR3_URDF)
             .map_err(|e| anyhow!("franka-rs's FR3 model does not load: {e}"))?;
         let tool = self.tool.flange_to_tip;
         let joints = |q: &Joints| -> [f64; 7] { std::array::from_fn(|i| q[i]) };
-        let pose = |q: &Joints| -> Pose {
-            let p = model.pose_q(Frame::EndEffector, &joints(q), &tool, &IDENTITY);
-            (
-                Matrix3::from_fn(|i, j| p[j * 4 + i]),
-                Vector3::new(p[12], p[13], p[14]),
-            )
-        };
-        let jacobian = |q: &Joints| {
-            Jacobian::from_column_slice(&model.zero_jacobian_q(
-                Frame::EndEffector,
-                &joints(q),
-                &tool,
-                &IDENTITY,
-            ))
-        };
+        let pose = |q: &Joints| tool_pose(&model, &joints(q), &tool);
+        let jacobian = |q: &Joints| tool_jacobian(&model, &joints(q), &tool);
         let w = self.limits.workspace_m;
         let mut points = vec![w.map(|r| 0.5 * (r[0] + r[1]))];
         for x in w[0] {
